@@ -1,0 +1,35 @@
+# Two commands do all the set-up on a fresh Debian/Ubuntu machine: `make demo` and `make test`.
+# Both are idempotent: they install what is missing (system GL libraries, the virtual environment,
+# the package) and then run.
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test sysdeps venv lint bench clean
+
+demo: sysdeps $(STAMP)
+	$(VENV)/bin/vln-pilot scene render --spawn living_room --out runs/demo-scene
+
+test: sysdeps $(STAMP)
+	$(PY) -m pytest -q
+
+sysdeps:
+	@bash scripts/install-system-deps.sh
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check src tests bench
+
+bench: sysdeps $(STAMP)
+	$(PY) bench/step_cost.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info src/*.egg-info

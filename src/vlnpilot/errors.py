@@ -1,0 +1,28 @@
+"""The small error tree of VLN-Pilot. Every error a user can cause is a VLNPilotError with a clear message."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+
+class VLNPilotError(Exception):
+    """Base of every error that VLN-Pilot raises on purpose; the CLI prints its message without a traceback."""
+
+
+class UnknownNameError(VLNPilotError, KeyError):
+    """A name (scene, spawn, room, target, pilot, ...) that is not known; the message lists the valid ones."""
+
+    def __init__(self, kind: str, name: object, known: Iterable[str]):
+        self.kind, self.name, self.known = kind, name, sorted(known)
+        super().__init__(f"unknown {kind} {name!r}; valid {kind}s: {', '.join(self.known)}")
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return self.args[0]
+
+
+class ConfigError(VLNPilotError, ValueError):
+    """An option or value outside its valid range."""
+
+
+class RenderBackendError(VLNPilotError, RuntimeError):
+    """The headless OpenGL backend cannot start; the message names the library and the install command."""

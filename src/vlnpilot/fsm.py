@@ -1,0 +1,141 @@
+"""The finite-state machine of the paper's Tables 1 and 3: one table, read by prompts, schemas and validation.
+
+Where the paper is incomplete we decide, and mark each decision with `added_next` (never mixed into
+`paper_next`, so a test can check the paper's Table 3 verbatim):
+
+* Start has no row: the controller handles it (take-off) and enters Recognize Room without asking the
+  pilot, so it costs no step.
+* Recognize Room, Oriented Towards Door and Go Through Door may stay in themselves: one 10 cm move
+  rarely finishes recognising, aligning or crossing.
+* Position in Center of Room is named by Table 3 but has no row. After a crossing the drone moves
+  into the new room and then recognises it again: moves A1, A2 and rotations; next states itself or
+  Recognize Room.
+* Stay on Room and Describe Object are final: entering one ends the episode and the monitor judges it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+from vlnpilot.commands import COMMANDS
+from vlnpilot.errors import UnknownNameError
+
+
+class State(str, Enum):
+    START = "Start"
+    RECOGNIZE_ROOM = "Recognize Room"
+    SEARCH_OPEN_DOOR = "Search Open Door"
+    ORIENTED_TOWARDS_DOOR = "Oriented Towards Door"
+    GO_THROUGH_DOOR = "Go Through Door"
+    POSITION_IN_CENTER = "Position in Center of Room"
+    STAY_ON_ROOM = "Stay on Room"
+    SEARCH_OBJECT = "Search Object"
+    REACH_OBJECT = "Reach Object"
+    DESCRIBE_OBJECT = "Describe Object"
+    FINAL = "Final"
+
+    def __str__(self) -> str:
+        return self.value
+
+
+def parse_state(name: str) -> State:
+    """A state from its name, ignoring case, spaces, '_' and '-' (models write 'Search open Door')."""
+    key = "".join(ch for ch in str(name).lower() if ch.isalnum())
+    for s in State:
+        if "".join(ch for ch in s.value.lower() if ch.isalnum()) == key or s.name.lower().replace("_", "") == key:
+            return s
+    raise UnknownNameError("state", name, [s.value for s in State])
+
+
+def _moves(*codes: str) -> tuple[str, ...]:
+    out: list[str] = []
+    for code in codes:
+        if "-" in code:  # "B1-B3"
+            first, last = code.split("-")
+            out += [f"{first[0]}{i}" for i in range(int(first[1:]), int(last[1:]) + 1)]
+        else:
+            out.append(code)
+    assert all(c in COMMANDS for c in out), out
+    return tuple(out)
+
+
+@dataclass(frozen=True)
+class StateSpec:
+    state: State
+    goal: str
+    moves: tuple[str, ...]
+    paper_next: tuple[State, ...]
+    added_next: tuple[State, ...] = ()
+    final: bool = False
+    description: str = ""  # Table 1's description
+
+    @property
+    def next_states(self) -> tuple[State, ...]:
+        return self.paper_next + self.added_next
+
+
+S = State
+_PAPER_TABLE: tuple[StateSpec, ...] = (
+    StateSpec(S.START, "Activate the system and take off.", _moves("E"), (S.RECOGNIZE_ROOM,),
+              description="The initial state where the system is activated."),
+    StateSpec(S.RECOGNIZE_ROOM, "Identify the current room.", _moves("A1", "B1-B3", "C1-C3"),
+              (S.STAY_ON_ROOM, S.SEARCH_OBJECT, S.SEARCH_OPEN_DOOR), (S.RECOGNIZE_ROOM,),
+              description="The agent tries to determine the room in which it is currently located."),
+    StateSpec(S.STAY_ON_ROOM, "Remain stationary in the target room.", _moves("E"), (S.FINAL,), final=True,
+              description="When the target room is reached and no object is to be found."),
+    StateSpec(S.SEARCH_OBJECT, "Locate and center the target object.", _moves("A1", "A2", "B1-B3", "C1-C3"),
+              (S.SEARCH_OBJECT, S.REACH_OBJECT),
+              description="Once inside the target room, the system searches for the specific object of interest."),
+    StateSpec(S.REACH_OBJECT, "Approach and align with the object.", _moves("A1", "B1", "C1", "D1", "D2", "E"),
+              (S.DESCRIBE_OBJECT, S.SEARCH_OBJECT, S.REACH_OBJECT),
+              description="Guides the drone closer to the object."),
+    StateSpec(S.DESCRIBE_OBJECT, "Stop and describe the object.", _moves("E"), (S.FINAL,), final=True,
+              description="When close to the object, the system describes its position and orientation "
+                          "with respect to the target."),
+    StateSpec(S.SEARCH_OPEN_DOOR, "Look for an open door to the goal.", _moves("A1", "B1-B3", "C1-C3", "E"),
+              (S.SEARCH_OPEN_DOOR, S.ORIENTED_TOWARDS_DOOR),
+              description="If the target room is different from the current one, the system searches for "
+                          "an open door to navigate through."),
+    StateSpec(S.ORIENTED_TOWARDS_DOOR, "Align with the open door.", _moves("A1", "B1", "C1", "D1", "D2"),
+              (S.GO_THROUGH_DOOR, S.SEARCH_OPEN_DOOR), (S.ORIENTED_TOWARDS_DOOR,),
+              description="Aligns the drone to face the detected open door before crossing it."),
+    StateSpec(S.GO_THROUGH_DOOR, "Enter the next room through the door.", _moves("A1"),
+              (S.POSITION_IN_CENTER, S.ORIENTED_TOWARDS_DOOR), (S.GO_THROUGH_DOOR,),
+              description="Commands the drone to move through the recognized and oriented door."),
+    StateSpec(S.POSITION_IN_CENTER, "Move away from the door towards the middle of the new room.",
+              _moves("A1", "A2", "B1-B3", "C1-C3"), (), (S.POSITION_IN_CENTER, S.RECOGNIZE_ROOM),
+              description="After crossing a door, the drone moves into the new room before recognising it."),
+    StateSpec(S.FINAL, "The episode is over.", _moves("E"), (), final=True,
+              description="Terminal marker used by the final states."),
+)
+
+# Profiles change allowed moves only, never the transitions. `paper` is Table 3 verbatim.
+# `fast` lets the navigation states fly longer forward moves (use it with a safety shield).
+_FAST_EXTRA: dict[State, tuple[str, ...]] = {
+    S.RECOGNIZE_ROOM: ("A2",),
+    S.SEARCH_OPEN_DOOR: ("A2", "A3"),
+    S.ORIENTED_TOWARDS_DOOR: ("A2",),
+    S.POSITION_IN_CENTER: ("A3",),
+    S.SEARCH_OBJECT: ("A3",),
+}
+PROFILES = ("paper", "fast")
+FINAL_STATES = frozenset(s.state for s in _PAPER_TABLE if s.final)
+
+
+def fsm_table(profile: str = "paper") -> dict[State, StateSpec]:
+    """The state table for a profile ('paper' is the default and follows the paper's Table 3)."""
+    if profile not in PROFILES:
+        raise UnknownNameError("FSM profile", profile, PROFILES)
+    table = {spec.state: spec for spec in _PAPER_TABLE}
+    if profile == "fast":
+        for state, extra in _FAST_EXTRA.items():
+            spec = table[state]
+            moves = tuple(c for c in COMMANDS if c in spec.moves or c in extra)
+            table[state] = StateSpec(spec.state, spec.goal, moves, spec.paper_next, spec.added_next,
+                                     spec.final, spec.description)
+    return table
+
+
+def state_spec(state: State | str, profile: str = "paper") -> StateSpec:
+    return fsm_table(profile)[state if isinstance(state, State) else parse_state(state)]

@@ -1,0 +1,514 @@
+"""Prompts and the model-answer contract of the paper's "VLLM Module" (Appendices A-D).
+
+The prompt has three parts: a system prompt identical for every episode (Appendix A + the output format of
+Appendix C), the episode context (query + topological map), and a per-state prompt (Appendix B) whose
+movement list, next states and valid answer values are rendered from `commands.COMMANDS` and the FSM table,
+so that prompt, JSON schema and validation cannot disagree. The wording lives in `prompts/*.md`.
+"""
+
+from __future__ import annotations
+
+import ast
+import hashlib
+import io
+import json
+import re
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from functools import cache
+from importlib.resources import files
+from string import Template
+from typing import Any
+
+import numpy as np
+from PIL import Image
+
+from vlnpilot.commands import COMMANDS, Command, Kind, get_command
+from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
+from vlnpilot.fsm import PROFILES, State, StateSpec, parse_state, state_spec
+from vlnpilot.pilots.base import DOOR_POSITIONS, Decision, PilotInput
+
+__all__ = [
+    "DecisionError",
+    "Prompt",
+    "PromptTemplateError",
+    "ASKED_STATES",
+    "FIELDS",
+    "build_prompt",
+    "decision_schema",
+    "encode_jpeg",
+    "map_rooms",
+    "normalize_decision",
+    "parse_decision",
+    "prompt_hash",
+    "render_state_prompt",
+    "render_state_template",
+    "system_prompt",
+    "validate_decision",
+]
+
+FIELDS: tuple[str, ...] = ("room", "movement", "state", "description", "door_position")
+# The controller handles Start (take-off) itself and never asks in Final: every other state has a template.
+ASKED_STATES: tuple[State, ...] = tuple(s for s in State if s not in (State.START, State.FINAL))
+
+
+class DecisionError(VLNPilotError):
+    """A model reply that cannot be read as a Decision; `reason` says why in one line (it is fed back on a re-ask)."""
+
+    def __init__(self, reason: str, raw_text: str | None = None):
+        super().__init__(reason)
+        self.reason = reason
+        self.raw_text = raw_text
+
+
+class PromptTemplateError(VLNPilotError):
+    """A prompt template disagrees with the command or FSM table (raised at render time, never silently)."""
+
+
+# --------------------------------------------------------------------------------------------------- templates
+
+_TEMPLATE_DIR = "prompts"
+
+
+@cache
+def _template(name: str) -> str:
+    path = files("vlnpilot") / _TEMPLATE_DIR / name
+    try:
+        return path.read_text(encoding="utf-8").strip() + "\n"
+    except FileNotFoundError:
+        raise PromptTemplateError(f"prompt template {_TEMPLATE_DIR}/{name} is missing") from None
+
+
+def _template_name(state: State) -> str:
+    return f"state_{state.name.lower()}.md"
+
+
+def _check_asked(state: State) -> None:
+    if state not in ASKED_STATES:
+        raise ConfigError(
+            f"the pilot is never asked in state '{state}' (the controller handles Start; Final is terminal); "
+            f"asked states: {', '.join(s.value for s in ASKED_STATES)}"
+        )
+
+
+def _codes(codes: Sequence[str]) -> str:
+    return ", ".join(f"`{c}`" for c in codes)
+
+
+def _prose_codes(codes: Sequence[str]) -> str:
+    """'`A1`', '`A1` or `A2`', '`B1`, `B2` or `C1`': command lists inside policy sentences."""
+    quoted = [f"`{c}`" for c in codes]
+    return quoted[0] if len(quoted) == 1 else ", ".join(quoted[:-1]) + " or " + quoted[-1]
+
+
+def _kind_title(kind: Kind) -> str:
+    return {
+        Kind.FORWARD: "Forward movement",
+        Kind.ROTATE_RIGHT: "Right rotation (in place)",
+        Kind.ROTATE_LEFT: "Left rotation (in place)",
+        Kind.LATERAL_LEFT: "Lateral movement (sideways, no rotation)",
+        Kind.LATERAL_RIGHT: "Lateral movement (sideways, no rotation)",
+        Kind.NONE: "No movement",
+    }[kind]
+
+
+def _movement_commands(moves: Sequence[str]) -> str:
+    """The MOVEMENT COMMANDS body of Appendix B, grouped by command letter, from the command table."""
+    groups: dict[str, list[Command]] = {}
+    for code, command in COMMANDS.items():  # table order, not the order of `moves`
+        if code in moves:
+            groups.setdefault(code[0], []).append(command)
+    lines = ["Only return **ONE** movement command from the list below:"]
+    for letter, commands in groups.items():
+        lines += ["", f"### {letter}. {_kind_title(commands[0].kind)}:"]
+        lines += [f"- `{c.code}`: {c.description}" for c in commands]
+    return "\n".join(lines)
+
+
+_SECTION_RE = re.compile(r"^## OUTPUT STATE RULES[ \t]*$(.*?)(?=^## |^---[ \t]*$|\Z)", re.M | re.S)
+_RULE_RE = re.compile(r"^[ \t]*[-*][ \t]*`([^`]+)`[ \t]*:", re.M)
+_CODE_RE = re.compile(r"`([A-Ea-e][1-3]?)`")
+
+
+def _rule_states(text: str, where: str) -> list[State]:
+    sections = _SECTION_RE.findall(text)
+    if len(sections) != 1:
+        raise PromptTemplateError(f"{where}: needs exactly one '## OUTPUT STATE RULES' section, found {len(sections)}")
+    names = _RULE_RE.findall(sections[0])
+    states: list[State] = []
+    for name in names:
+        try:
+            states.append(parse_state(name))
+        except UnknownNameError as exc:
+            raise PromptTemplateError(f"{where}: OUTPUT STATE RULES: {exc}") from None
+    return states
+
+
+def render_state_template(template: str, spec: StateSpec, *, where: str = "state template") -> str:
+    """Render one Appendix-B state template against its table row; fail loudly if they disagree.
+
+    Checks: the OUTPUT STATE RULES name each allowed next state exactly once and nothing else; every
+    command code quoted in the template's own prose is allowed in the state; every placeholder is known.
+    """
+    rule_states = _rule_states(template, where)
+    allowed = set(spec.next_states)
+    duplicated = sorted({s.value for s in rule_states if rule_states.count(s) > 1})
+    extra = [s.value for s in rule_states if s not in allowed]
+    missing = [s.value for s in spec.next_states if s not in rule_states]
+    if duplicated or extra or missing:
+        raise PromptTemplateError(
+            f"{where}: OUTPUT STATE RULES disagree with the FSM table for '{spec.state}': "
+            f"not allowed: {extra or 'none'}; missing: {missing or 'none'}; duplicated: {duplicated or 'none'}; "
+            f"allowed next states: {', '.join(s.value for s in spec.next_states)}"
+        )
+    if "$movement_commands" not in template:
+        raise PromptTemplateError(f"{where}: must contain the $movement_commands placeholder")
+    named = {c.upper() for c in _CODE_RE.findall(template)}
+    bad = sorted(c for c in named if c not in spec.moves)
+    if bad:
+        raise PromptTemplateError(
+            f"{where}: names commands {bad} that are not allowed in '{spec.state}' (allowed: {', '.join(spec.moves)})"
+        )
+
+    def of(*kinds: Kind) -> list[str]:
+        return [c for c in spec.moves if COMMANDS[c].kind in kinds]
+
+    values: dict[str, str] = {
+        "state": spec.state.value,
+        "goal": spec.goal,
+        "movement_commands": _movement_commands(spec.moves),
+    }
+    groups = {
+        "forward_moves": of(Kind.FORWARD),
+        "rotations": of(Kind.ROTATE_RIGHT, Kind.ROTATE_LEFT),
+        "right_rotations": of(Kind.ROTATE_RIGHT),
+        "left_rotations": of(Kind.ROTATE_LEFT),
+        "lateral_moves": of(Kind.LATERAL_LEFT, Kind.LATERAL_RIGHT),
+    }
+    values.update({name: _prose_codes(codes) for name, codes in groups.items() if codes})  # empty group: KeyError below
+    try:
+        body = Template(template).substitute(values)
+    except (KeyError, ValueError) as exc:
+        raise PromptTemplateError(
+            f"{where}: bad or unavailable placeholder {exc} in state '{spec.state}'; available: {sorted(values)}"
+        ) from None
+    output_values = Template(_template("output_values.md")).substitute(
+        movements=_codes(spec.moves),
+        states=_codes([s.value for s in spec.next_states]),
+        door_positions=_codes(DOOR_POSITIONS),
+    )
+    return body.rstrip() + "\n\n---\n\n" + output_values
+
+
+@cache
+def render_state_prompt(state: State | str, profile: str = "paper") -> str:
+    """This state's prompt (Appendix B style) for an FSM profile, rendered from the command and FSM tables."""
+    spec = state_spec(state, profile)
+    _check_asked(spec.state)
+    name = _template_name(spec.state)
+    return render_state_template(_template(name), spec, where=f"{_TEMPLATE_DIR}/{name}")
+
+
+@cache
+def system_prompt() -> str:
+    """Appendix A + Appendix C: the same text for every episode, state and profile (a cacheable prefix)."""
+    return _template("system.md").rstrip() + "\n\n---\n\n" + _template("output.md")
+
+
+# ----------------------------------------------------------------------------------------------------- inputs
+
+
+def map_rooms(topological_map: Mapping[str, Any]) -> list[str]:
+    """Room ids of a topological map (nodes as dicts with `id`/`name`, as plain strings, or an id->node mapping)."""
+    nodes = topological_map.get("nodes", topological_map.get("rooms", ()))
+    if isinstance(nodes, Mapping):
+        return [str(k) for k in nodes]
+    rooms: list[str] = []
+    for node in nodes or ():
+        if isinstance(node, Mapping):
+            room = node.get("id", node.get("name"))
+            if room is not None:
+                rooms.append(str(room))
+        else:
+            rooms.append(str(node))
+    return list(dict.fromkeys(rooms))
+
+
+def _context(query: str, topological_map: Mapping[str, Any]) -> str:
+    dumped = json.dumps(topological_map, indent=2, sort_keys=True, ensure_ascii=False, default=str)
+    return (
+        f"## User query\n{query.strip()}\n\n"
+        "## Topological map\n"
+        "Nodes are rooms (`id`, `name`); edges are open doors between two rooms.\n\n"
+        f"```json\n{dumped}\n```\n"
+    )
+
+
+def _step_text(state: State, previous_movement: str | None, step: int, feedback: Sequence[str]) -> str:
+    if previous_movement is None or not str(previous_movement).strip():
+        previous = "none (this is the first step of the episode)"
+    else:
+        try:
+            command = get_command(previous_movement)
+            previous = f"`{command.code}` ({command.description})"
+        except UnknownNameError:
+            previous = f"`{previous_movement}`"
+    text = f"## Current FSM state\n{state.value}\n\n## Previous movement\n{previous}\n\n## Step\n{step}\n"
+    lines = [" ".join(str(line).split()) for line in feedback if line and str(line).strip()]
+    if lines:
+        text += "\n## Controller feedback\n" + "\n".join(f"- {line}" for line in lines) + "\n"
+    return text
+
+
+def encode_jpeg(image: np.ndarray, quality: int = 85, max_side: int | None = None) -> bytes:
+    """Encode an HxWx3 uint8 RGB image (HxWx4 and HxW accepted) as JPEG, downscaled so that max(H, W) <= max_side."""
+    arr = np.asarray(image)
+    if arr.dtype != np.uint8:
+        raise ConfigError(f"image must be uint8, got {arr.dtype}")
+    if arr.ndim == 3 and arr.shape[2] == 4:
+        arr = arr[:, :, :3]
+    if not (arr.ndim == 2 or (arr.ndim == 3 and arr.shape[2] == 3)) or arr.shape[0] == 0 or arr.shape[1] == 0:
+        raise ConfigError(f"image must be HxWx3 (RGB), got shape {arr.shape}")
+    if not 1 <= int(quality) <= 100:
+        raise ConfigError(f"jpeg quality must be in 1..100, got {quality}")
+    if max_side is not None and max_side < 1:
+        raise ConfigError(f"max_side must be >= 1, got {max_side}")
+    img = Image.fromarray(np.ascontiguousarray(arr))
+    if max_side is not None and max(img.size) > max_side:
+        scale = max_side / max(img.size)
+        size = (max(1, round(img.width * scale)), max(1, round(img.height * scale)))
+        img = img.resize(size, Image.Resampling.BILINEAR, reducing_gap=2.0)
+    buf = io.BytesIO()
+    img.save(buf, format="JPEG", quality=int(quality))
+    return buf.getvalue()
+
+
+# ------------------------------------------------------------------------------------------------------ prompt
+
+
+@dataclass(frozen=True)
+class Prompt:
+    """One step's prompt, split so that the stable parts come first (provider prompt caches key on prefixes)."""
+
+    system: str  # Appendix A + Appendix C: identical for every episode (cache-friendly prefix)
+    context: str  # the user query + topological map JSON: constant within an episode
+    state_prompt: str  # this state's prompt (Appendix B style), rendered from the FSM + command tables
+    step_text: str  # current FSM state, previous movement, step number, controller feedback lines
+    image_jpeg: bytes  # the front image as JPEG
+    schema: dict  # JSON schema of this state's answer (see decision_schema)
+
+    def user_text(self) -> str:
+        """context + state_prompt + step_text, in that order (stable parts first)."""
+        return "\n---\n\n".join(part.rstrip() + "\n" for part in (self.context, self.state_prompt, self.step_text))
+
+
+def build_prompt(pilot_input: PilotInput, *, jpeg_quality: int = 85, max_side: int | None = None) -> Prompt:
+    """Everything a model pilot sends for one step: texts from the templates and tables, JPEG, answer schema."""
+    state = pilot_input.state if isinstance(pilot_input.state, State) else parse_state(pilot_input.state)
+    return Prompt(
+        system=system_prompt(),
+        context=_context(pilot_input.query, pilot_input.topological_map),
+        state_prompt=render_state_prompt(state, pilot_input.profile),
+        step_text=_step_text(state, pilot_input.previous_movement, pilot_input.step, pilot_input.feedback),
+        image_jpeg=encode_jpeg(pilot_input.image, jpeg_quality, max_side),
+        schema=decision_schema(state, pilot_input.profile, map_rooms(pilot_input.topological_map)),
+    )
+
+
+def decision_schema(state: State, profile: str = "paper", rooms: Sequence[str] | None = None) -> dict:
+    """JSON schema of this state's answer, in the subset that OpenAI strict structured outputs accept."""
+    spec = state_spec(state, profile)
+    _check_asked(spec.state)
+    room: dict[str, Any] = {"type": "string", "description": "id of the current room in the map, or unknown"}
+    if rooms is not None:
+        room["enum"] = list(dict.fromkeys([*(str(r) for r in rooms), "unknown"]))
+    properties: dict[str, Any] = {
+        "room": room,
+        "movement": {"type": "string", "enum": list(spec.moves), "description": "one movement command"},
+        "state": {"type": "string", "enum": [s.value for s in spec.next_states], "description": "next FSM state"},
+        "description": {"type": "string", "description": "what the drone sees and why it decides so"},
+        "door_position": {"type": "string", "enum": list(DOOR_POSITIONS), "description": "where a door is"},
+    }
+    return {"type": "object", "properties": properties, "required": list(FIELDS), "additionalProperties": False}
+
+
+def prompt_hash(profile: str = "paper") -> str:
+    """A short sha256 of every prompt text rendered for every asked state of a profile: run provenance."""
+    if profile not in PROFILES:
+        raise UnknownNameError("FSM profile", profile, PROFILES)
+    h = hashlib.sha256()
+    sample_map = {"edges": [{"from": "a", "to": "b"}], "nodes": [{"id": "a", "name": "A"}, {"id": "b", "name": "B"}]}
+    parts = [system_prompt(), _context("query", sample_map)]
+    for state in ASKED_STATES:
+        parts += [render_state_prompt(state, profile), _step_text(state, "A1", 1, ("feedback",))]
+        parts.append(json.dumps(decision_schema(state, profile, ["a", "b"]), sort_keys=True))
+    for part in parts:
+        h.update(part.encode("utf-8") + b"\x00")
+    return h.hexdigest()[:12]
+
+
+# ------------------------------------------------------------------------------------------------------ answers
+
+_MAX_TEXT = 100_000  # characters of a reply that are searched for the JSON object
+_MAX_STARTS = 200  # '{' positions tried (bounds the work on adversarial replies)
+_MAX_OBJECT = 8_000  # characters a Python-dict style answer may span
+_DICT_START_RE = re.compile(r"\{\s*['\"]")
+_FENCE_RE = re.compile(r"```[ \t]*([A-Za-z0-9_+-]*)[ \t]*\n?(.*?)```", re.S)
+_DOOR_ALIASES = {"centre": "center", "middle": "center", "notvisible": "not_visible", "none": "not_visible"}
+
+
+def _balanced_end(text: str, start: int) -> int | None:
+    """Index of the '}' closing the '{' at `start`, skipping '...' and "..." strings; None if unbalanced."""
+    depth, quote, escaped = 0, "", False
+    for i in range(start, min(len(text), start + _MAX_OBJECT)):
+        ch = text[i]
+        if quote:
+            if escaped:
+                escaped = False
+            elif ch == "\\":
+                escaped = True
+            elif ch == quote:
+                quote = ""
+        elif ch in "\"'":
+            quote = ch
+        elif ch == "{":
+            depth += 1
+        elif ch == "}":
+            depth -= 1
+            if depth == 0:
+                return i
+    return None
+
+
+def _decode_at(text: str, start: int) -> Any:
+    try:
+        return json.JSONDecoder().raw_decode(text, start)[0]
+    except (ValueError, RecursionError):
+        pass
+    if not _DICT_START_RE.match(text, start):
+        return None
+    end = _balanced_end(text, start)
+    if end is None:
+        return None
+    try:  # the paper's Appendix D: a Python dict with single quotes
+        return ast.literal_eval(text[start : end + 1])
+    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
+        return None
+
+
+def _dicts(text: str) -> Iterator[dict]:
+    """Every dict found in the reply: fenced blocks first, then the whole text, outer objects before inner ones."""
+    sources = [m.group(2) for m in _FENCE_RE.finditer(text)] + [text]
+    tried = 0
+    for source in sources:
+        for match in re.finditer(r"\{", source):
+            tried += 1
+            if tried > _MAX_STARTS:
+                return
+            obj = _decode_at(source, match.start())
+            if isinstance(obj, dict):
+                yield obj
+
+
+def _string_field(obj: Mapping[str, Any], name: str, default: str | None = None) -> str:
+    value = obj.get(name, default)
+    if value is None:
+        if default is None:
+            raise DecisionError(f"field {name!r} is missing or null")
+        value = default
+    if not isinstance(value, str):
+        raise DecisionError(f"field {name!r} must be a string, got {type(value).__name__} {value!r:.60}")
+    return value.strip()
+
+
+def parse_decision(text: str) -> Decision:
+    """Read a Decision out of a model reply (JSON, fenced JSON, prose around it, or Appendix D's Python dict).
+
+    Raises DecisionError(reason) when there is no object, a field is missing or mistyped, or door_position is
+    not one of left/center/right/not_visible. Movement and state are kept as written (see validate_decision).
+    """
+    if not isinstance(text, str):
+        raise DecisionError(f"the reply must be text, got {type(text).__name__}")
+    searched = text[:_MAX_TEXT]
+    found: dict | None = None
+    partial: dict | None = None
+    for obj in _dicts(searched):
+        keys = {str(k).strip().lower(): v for k, v in obj.items()}
+        if {"movement", "state"} <= keys.keys():
+            found = keys
+            break
+        if partial is None and keys.keys() & set(FIELDS):
+            partial = keys
+    if found is None:
+        if partial is not None:
+            missing = [f for f in ("room", "movement", "state") if f not in partial]
+            raise DecisionError(f"the JSON object lacks the field(s) {', '.join(missing)}", text)
+        raise DecisionError(
+            f"no JSON object with the fields {', '.join(FIELDS)} found in the reply ({len(text)} characters)", text
+        )
+    if "room" not in found:
+        raise DecisionError("the JSON object lacks the field(s) room", text)
+    try:
+        room = _string_field(found, "room", "unknown")
+        movement = _string_field(found, "movement")
+        state = _string_field(found, "state")
+        description = _string_field(found, "description", "")
+        door = _string_field(found, "door_position", "not_visible").lower()
+    except DecisionError as exc:
+        raise DecisionError(exc.reason, text) from None
+    door = re.sub(r"[\s\-]+", "_", door)
+    door = _DOOR_ALIASES.get(door.replace("_", ""), door)
+    if door not in DOOR_POSITIONS:
+        raise DecisionError(f"door_position {door!r:.60} is not one of {', '.join(DOOR_POSITIONS)}", text)
+    return Decision(
+        room=room or "unknown",
+        movement=movement,
+        state=state,
+        description=description,
+        door_position=door,  # type: ignore[arg-type]
+        raw_text=text,
+    )
+
+
+def validate_decision(decision: Decision, state: State, profile: str = "paper") -> str | None:
+    """None if the decision's movement and next state are allowed in `state`, else a one-line reason.
+
+    The reason names the valid choices so that it can be fed back to the model on a re-ask.
+    """
+    spec = state_spec(state, profile)
+    reasons: list[str] = []
+    allowed_moves = ", ".join(spec.moves)
+    try:
+        code = get_command(decision.movement).code
+    except UnknownNameError:
+        reasons.append(f"movement {decision.movement!r:.40} is not a movement command; allowed in '{spec.state}': "
+                       f"{allowed_moves}")
+    else:
+        if code not in spec.moves:
+            reasons.append(f"movement {code!r} is not allowed in state '{spec.state}'; allowed: {allowed_moves}")
+    allowed_next = ", ".join(f"'{s.value}'" for s in spec.next_states)
+    try:
+        nxt = parse_state(decision.state)
+    except UnknownNameError:
+        reasons.append(f"next state {decision.state!r:.60} is not an FSM state; allowed from '{spec.state}': "
+                       f"{allowed_next}")
+    else:
+        if nxt not in spec.next_states:
+            reasons.append(f"next state '{nxt.value}' is not allowed from '{spec.state}'; allowed: {allowed_next}")
+    return "; ".join(reasons) or None
+
+
+def normalize_decision(decision: Decision) -> Decision:
+    """The decision with its canonical movement code ('a1' -> 'A1') and state value ('search object' -> 'Search
+    Object'); a field that names no command or state is left as written (validate_decision reports it)."""
+    update: dict[str, str] = {}
+    try:
+        update["movement"] = get_command(decision.movement).code
+    except UnknownNameError:
+        pass
+    try:
+        update["state"] = parse_state(decision.state).value
+    except UnknownNameError:
+        pass
+    return decision.model_copy(update=update)
+

@@ -1,0 +1,408 @@
+"""The built-in `cabin`, after the paper's Furnished Cabin: a compact wooden cabin of three rooms in a row.
+
+    y ^  +-----------------+-------------+----------+
+  3.6 |  | kitchen  fridge | nightstands | bathtub  |
+      |  |                 |    bed      |    sink  |
+      |  |  TV  sofa       |             |          |
+      |  |          (door1)|  (door2)    |  toilet  |
+    0 +  +---front door----+--wardrobe---+----------+--> x
+         0                4.0           6.6        8.6
+
+Living room and kitchen on the left, bedroom in the centre, bathroom on the right, as in the paper's
+Figure 3. Open doorways (with frames and open door leaves) join living room-bedroom and
+bedroom-bathroom, so the bathroom is two crossings from the living room. The closed front door and the
+windows are distractors. Compact on purpose: with the paper's 10 cm forward moves in the navigation
+states, two crossings must fit in 50 steps.
+"""
+
+from __future__ import annotations
+
+import math
+from functools import cache
+
+from vlnpilot.scene.model import EXTERIOR, Door, Light, Material, Room, Scene, Solid, Spawn, Target
+from vlnpilot.types import Pose
+
+# -- names (one constants block for the scene) ----------------------------------------------------
+LIVING_ROOM, BEDROOM, BATHROOM = "living_room", "bedroom", "bathroom"
+DOOR_LIVING_BEDROOM, DOOR_BEDROOM_BATHROOM, FRONT_DOOR = "door_living_bedroom", "door_bedroom_bathroom", "front_door"
+REFRIGERATOR, MIRROR, SINK = "refrigerator", "mirror", "sink"
+
+# -- dimensions (metres) --------------------------------------------------------------------------
+X_LIVING, X_BED, X_BATH, Y_MAX = 4.0, 6.6, 8.6, 3.6  # east edges of the rooms; north wall
+WALL_H = 2.6  # ceiling height
+T_IN, T_EXT = 0.10, 0.15  # interior and exterior wall thickness
+JAMB, CASING = 0.05, 0.02  # door-frame jamb thickness; how far the casing stands proud of the wall
+DOOR_W, DOOR_H = 0.80, 2.00  # clear opening of the interior doorways
+FLIGHT_Z = 1.0
+
+MATERIALS: tuple[Material, ...] = (
+    Material("floor_living", texture="floor_wood", texrepeat=(1.0, 1.0), texuniform=True),
+    Material("floor_bedroom", texture="floor_wood_light", texrepeat=(1.0, 1.0), texuniform=True),
+    Material("floor_bathroom", texture="floor_tiles", texrepeat=(1.2, 1.2), texuniform=True),
+    Material("wall_living", texture="log_wall", texrepeat=(0.8, 0.8), texuniform=True),
+    Material("wall_bedroom", texture="log_wall_light", texrepeat=(0.8, 0.8), texuniform=True),
+    Material("wall_bathroom", texture="bath_tiles", texrepeat=(1.5, 1.5), texuniform=True, specular=0.5),
+    Material("wall_outside", texture="log_wall", texrepeat=(0.8, 0.8), texuniform=True),
+    Material("ceiling", texture="painted_wood", texrepeat=(0.5, 0.5), texuniform=True),
+    Material("door_frame", rgba=(0.93, 0.92, 0.88, 1.0), specular=0.3),
+    Material("door_leaf", texture="furniture_wood", texrepeat=(1.0, 1.0)),
+    Material("front_door", rgba=(0.45, 0.22, 0.12, 1.0), specular=0.3),
+    Material("metal", rgba=(0.75, 0.75, 0.78, 1.0), specular=0.8, shininess=0.8),
+    Material("chrome", rgba=(0.85, 0.87, 0.9, 1.0), specular=1.0, shininess=0.9),
+    Material("stainless", rgba=(0.80, 0.82, 0.85, 1.0), specular=0.7, shininess=0.6),
+    Material("black", rgba=(0.06, 0.06, 0.07, 1.0), specular=0.6, shininess=0.7),
+    Material("dark_grey", rgba=(0.25, 0.25, 0.27, 1.0), specular=0.3),
+    Material("tv_screen", rgba=(0.10, 0.16, 0.30, 1.0), specular=0.9, shininess=0.9, emission=0.35),
+    Material("wood", texture="furniture_wood", texrepeat=(1.0, 1.0)),
+    Material("dark_wood", rgba=(0.30, 0.19, 0.11, 1.0), specular=0.2),
+    Material("painted_wood", texture="painted_wood", texrepeat=(1.0, 1.0)),
+    Material("cabinet", rgba=(0.55, 0.68, 0.60, 1.0), specular=0.25),
+    Material("countertop", rgba=(0.20, 0.20, 0.22, 1.0), specular=0.6, shininess=0.6),
+    Material("kitchen_tiles", texture="kitchen_tiles", texrepeat=(2.0, 2.0), texuniform=True),
+    Material("sofa", texture="sofa_fabric", texrepeat=(2.0, 2.0)),
+    Material("cushion_red", rgba=(0.75, 0.25, 0.2, 1.0)),
+    Material("cushion_yellow", rgba=(0.90, 0.75, 0.3, 1.0)),
+    Material("rug", texture="rug", texrepeat=(1.0, 1.0)),
+    Material("books", texture="books", texrepeat=(1.0, 1.0)),
+    Material("lampshade", rgba=(0.98, 0.92, 0.78, 1.0), emission=0.6),
+    Material("window_view", texture="window_view", texrepeat=(1.0, 1.0), emission=0.7),
+    Material("window_frame", rgba=(0.95, 0.95, 0.95, 1.0)),
+    Material("fridge", rgba=(0.86, 0.88, 0.90, 1.0), specular=0.8, shininess=0.7),
+    Material("mattress", rgba=(0.95, 0.95, 0.93, 1.0)),
+    Material("blanket", texture="blanket", texrepeat=(1.0, 1.0)),
+    Material("pillow", rgba=(0.97, 0.97, 1.0, 1.0)),
+    Material("mirror_glass", texture="mirror_glass", texrepeat=(1.0, 1.0), specular=1.0, shininess=1.0,
+             emission=0.25),
+    Material("mirror_frame", rgba=(0.72, 0.55, 0.25, 1.0), specular=0.6, shininess=0.6),
+    Material("painting", texture="painting", texrepeat=(1.0, 1.0)),
+    Material("ceramic", rgba=(0.97, 0.97, 0.97, 1.0), specular=0.7, shininess=0.7),
+    Material("water", rgba=(0.70, 0.80, 0.88, 1.0), specular=0.9, shininess=0.9),
+    Material("marble", rgba=(0.92, 0.92, 0.90, 1.0), specular=0.6, shininess=0.5),
+    Material("bath_mat", texture="bath_mat", texrepeat=(1.0, 1.0)),
+    Material("towel", rgba=(0.35, 0.6, 0.75, 1.0)),
+    Material("curtain", rgba=(0.75, 0.88, 0.95, 1.0)),
+    Material("plant", rgba=(0.20, 0.50, 0.22, 1.0)),
+    Material("pot", rgba=(0.70, 0.35, 0.20, 1.0)),
+)
+
+
+# -- primitive helpers ------------------------------------------------------------------------------
+def box(name: str, x0: float, x1: float, y0: float, y1: float, z0: float, z1: float, mat: str, *,
+        collide: bool = True, target: str | None = None) -> Solid:
+    """An axis-aligned box given by its extents (easier to read than centre and half-sizes)."""
+    lo_x, hi_x, lo_y, hi_y, lo_z, hi_z = min(x0, x1), max(x0, x1), min(y0, y1), max(y0, y1), min(z0, z1), max(z0, z1)
+    return Solid(name, "box", ((lo_x + hi_x) / 2, (lo_y + hi_y) / 2, (lo_z + hi_z) / 2),
+                 ((hi_x - lo_x) / 2, (hi_y - lo_y) / 2, (hi_z - lo_z) / 2), mat, collide=collide, target=target)
+
+
+def cyl(name: str, x: float, y: float, z0: float, z1: float, r: float, mat: str, *, collide: bool = True,
+        target: str | None = None) -> Solid:
+    return Solid(name, "cylinder", (x, y, (z0 + z1) / 2), (r, (z1 - z0) / 2, 0.0), mat, collide=collide,
+                 target=target)
+
+
+def ellipsoid(name: str, x: float, y: float, z: float, rx: float, ry: float, rz: float, mat: str, *,
+              collide: bool = True, target: str | None = None) -> Solid:
+    return Solid(name, "ellipsoid", (x, y, z), (rx, ry, rz), mat, collide=collide, target=target)
+
+
+Opening = tuple[float, float, float, float]  # centre along the wall, width, bottom z, top z
+
+
+def wall(name: str, axis: str, a0: float, a1: float, c0: float, c1: float, mat: str,
+         openings: tuple[Opening, ...] = ()) -> list[Solid]:
+    """A wall running along `axis` ('x' or 'y') from a0 to a1, spanning c0..c1 across, with openings cut out."""
+    solids: list[Solid] = []
+
+    def part(i: int, b0: float, b1: float, z0: float, z1: float) -> None:
+        if b1 - b0 < 1e-6 or z1 - z0 < 1e-6:
+            return
+        n = f"{name}_{i}"
+        if axis == "x":
+            solids.append(box(n, b0, b1, c0, c1, z0, z1, mat))
+        else:
+            solids.append(box(n, c0, c1, b0, b1, z0, z1, mat))
+
+    cursor, i = a0, 0
+    for centre, width, zb, zt in sorted(openings):
+        lo, hi = centre - width / 2, centre + width / 2
+        part(i, cursor, lo, 0.0, WALL_H)
+        part(i + 1, lo, hi, 0.0, zb)
+        part(i + 2, lo, hi, zt, WALL_H)
+        cursor, i = hi, i + 3
+    part(i, cursor, a1, 0.0, WALL_H)
+    return solids
+
+
+def _door_box(door: Door, name: str, d0: float, d1: float, s0: float, s1: float, z0: float, z1: float,
+              mat: str, **kw) -> Solid:
+    """A box given in the door's frame: depth d along the normal, lateral s to the left (axis-aligned doors)."""
+    nx, ny = door.normal
+    lx, ly = -ny, nx
+    xs = [door.center[0] + d * nx + s * lx for d in (d0, d1) for s in (s0, s1)]
+    ys = [door.center[1] + d * ny + s * ly for d in (d0, d1) for s in (s0, s1)]
+    return box(name, min(xs), max(xs), min(ys), max(ys), z0, z1, mat, **kw)
+
+
+def doorway(door: Door, wall_t: float, *, leaf_into: int | None, hinge: str) -> list[Solid]:
+    """Frame (two jambs and a header, standing proud of the wall) and the door leaf.
+
+    `leaf_into` is the index in door.rooms of the room the open leaf swings into (None: closed door);
+    `hinge` is 'left' or 'right' seen along the door normal. Contact names: `<door>_frame_left`, ...
+    """
+    w, h, half_d = door.width, door.height, wall_t / 2 + CASING
+    solids = [
+        _door_box(door, f"{door.id}_frame_left", -half_d, half_d, w / 2, w / 2 + JAMB, 0, h + JAMB, "door_frame"),
+        _door_box(door, f"{door.id}_frame_right", -half_d, half_d, -w / 2 - JAMB, -w / 2, 0, h + JAMB, "door_frame"),
+        _door_box(door, f"{door.id}_frame_top", -half_d, half_d, -w / 2, w / 2, h, h + JAMB, "door_frame"),
+    ]
+    leaf_t, leaf_w = 0.04, w - 0.02
+    if leaf_into is None:  # closed: the leaf fills the opening
+        solids.append(_door_box(door, f"{door.id}_leaf", -leaf_t / 2, leaf_t / 2, -w / 2, w / 2, 0.01, h - 0.01,
+                                "front_door"))
+        knob_s = -w / 2 + 0.08 if hinge == "left" else w / 2 - 0.08
+        for sign in (-1, 1):
+            solids.append(_door_box(door, f"{door.id}_handle_{'in' if sign < 0 else 'out'}",
+                                    sign * leaf_t / 2, sign * (leaf_t / 2 + 0.06), knob_s - 0.02, knob_s + 0.02,
+                                    0.98, 1.02, "chrome"))
+        return solids
+    sign = -1.0 if leaf_into == 0 else 1.0  # depth direction of the room the leaf opens into
+    s_hinge = w / 2 if hinge == "left" else -w / 2
+    s_face = s_hinge - leaf_t if hinge == "left" else s_hinge + leaf_t
+    d_start = sign * (wall_t / 2 + CASING)
+    solids.append(_door_box(door, f"{door.id}_leaf", d_start, d_start + sign * leaf_w, s_hinge, s_face, 0.01,
+                            h - 0.01, "door_leaf"))
+    return solids
+
+
+def window(name: str, axis: str, at: float, centre: float, width: float, z0: float, z1: float,
+           outside: float) -> list[Solid]:
+    """A window in an exterior wall: a bright view pane at the outer face and a white frame with a mullion."""
+    def b(n: str, a0: float, a1: float, c0: float, c1: float, zz0: float, zz1: float, mat: str) -> Solid:
+        return box(n, a0, a1, c0, c1, zz0, zz1, mat) if axis == "x" else box(n, c0, c1, a0, a1, zz0, zz1, mat)
+
+    lo, hi, f = centre - width / 2, centre + width / 2, 0.04
+    pane_c0, pane_c1 = sorted((outside - 0.01 * math.copysign(1, outside - at), outside))
+    fr0, fr1 = sorted((at, outside))
+    return [
+        b(f"{name}_pane", lo, hi, pane_c0, pane_c1, z0, z1, "window_view"),
+        b(f"{name}_frame_bottom", lo, hi, fr0, fr1, z0, z0 + f, "window_frame"),
+        b(f"{name}_frame_top", lo, hi, fr0, fr1, z1 - f, z1, "window_frame"),
+        b(f"{name}_frame_a", lo, lo + f, fr0, fr1, z0, z1, "window_frame"),
+        b(f"{name}_frame_b", hi - f, hi, fr0, fr1, z0, z1, "window_frame"),
+        b(f"{name}_mullion", centre - f / 2, centre + f / 2, fr0, fr1, z0, z1, "window_frame"),
+        b(f"{name}_transom", lo, hi, fr0, fr1, (z0 + z1) / 2 - f / 2, (z0 + z1) / 2 + f / 2, "window_frame"),
+    ]
+
+
+# -- the cabin --------------------------------------------------------------------------------------
+DOORS = (
+    Door(DOOR_LIVING_BEDROOM, (LIVING_ROOM, BEDROOM), (X_LIVING, 1.0), DOOR_W, DOOR_H, 0.0),
+    Door(DOOR_BEDROOM_BATHROOM, (BEDROOM, BATHROOM), (X_BED, 1.1), DOOR_W, DOOR_H, 0.0),
+    Door(FRONT_DOOR, (LIVING_ROOM, EXTERIOR), (1.2, 0.0), 0.9, 2.05, -90.0, open=False),
+)
+_WINDOWS = (  # (name, axis, wall line, centre along, width, z0, z1, outer face)
+    ("living_window_south", "x", 0.0, 2.9, 1.0, 0.9, 1.9, -T_EXT),
+    ("living_window_west", "y", 0.0, 2.95, 0.9, 1.0, 1.9, -T_EXT),
+    ("bathroom_window_east", "y", X_BATH, 0.7, 0.6, 1.3, 1.85, X_BATH + T_EXT),
+)
+
+
+def _structure() -> list[Solid]:
+    s: list[Solid] = []
+    d1, d2, front = DOORS
+    cut = DOOR_W + 2 * JAMB
+    door1 = (d1.center[1], cut, 0.0, DOOR_H + JAMB)
+    door2 = (d2.center[1], cut, 0.0, DOOR_H + JAMB)
+    win = {w[0]: (w[3], w[4], w[5], w[6]) for w in _WINDOWS}
+    # floors (a collision slab plus a textured skin per room) and ceiling
+    s.append(box("floor", -T_EXT, X_BATH + T_EXT, -T_EXT, Y_MAX + T_EXT, -0.10, -0.002, "dark_wood"))
+    for room, x0, x1 in ((LIVING_ROOM, 0, X_LIVING), (BEDROOM, X_LIVING, X_BED), (BATHROOM, X_BED, X_BATH)):
+        s.append(box(f"floor_{room}", x0, x1, 0, Y_MAX, -0.002, 0.0, f"floor_{room.split('_')[0]}", collide=False))
+    s.append(box("ceiling", -T_EXT, X_BATH + T_EXT, -T_EXT, Y_MAX + T_EXT, WALL_H, WALL_H + 0.1, "ceiling"))
+    # exterior walls, per room so that each room keeps its own wall finish
+    ext = [
+        ("wall_living_south", "x", 0.0, X_LIVING, -T_EXT, 0.0, "wall_living",
+         ((front.center[0], front.width + 2 * JAMB, 0.0, front.height + JAMB), (*win["living_window_south"],))),
+        ("wall_living_north", "x", 0.0, X_LIVING, Y_MAX, Y_MAX + T_EXT, "wall_living", ()),
+        ("wall_living_west", "y", -T_EXT, Y_MAX + T_EXT, -T_EXT, 0.0, "wall_living", (win["living_window_west"],)),
+        ("wall_bedroom_south", "x", X_LIVING, X_BED, -T_EXT, 0.0, "wall_bedroom", ()),
+        ("wall_bedroom_north", "x", X_LIVING, X_BED, Y_MAX, Y_MAX + T_EXT, "wall_bedroom", ()),
+        ("wall_bathroom_south", "x", X_BED, X_BATH + T_EXT, -T_EXT, 0.0, "wall_bathroom", ()),
+        ("wall_bathroom_north", "x", X_BED, X_BATH + T_EXT, Y_MAX, Y_MAX + T_EXT, "wall_bathroom", ()),
+        ("wall_bathroom_east", "y", 0.0, Y_MAX, X_BATH, X_BATH + T_EXT, "wall_bathroom",
+         (win["bathroom_window_east"],)),
+    ]
+    for name, axis, a0, a1, c0, c1, mat, openings in ext:
+        s += wall(name, axis, a0, a1, c0, c1, mat, openings)
+    # interior walls: two halves, each with the finish of its room
+    s += wall("wall_living_bedroom_w", "y", 0, Y_MAX, X_LIVING - T_IN / 2, X_LIVING, "wall_living", (door1,))
+    s += wall("wall_living_bedroom_e", "y", 0, Y_MAX, X_LIVING, X_LIVING + T_IN / 2, "wall_bedroom", (door1,))
+    s += wall("wall_bedroom_bathroom_w", "y", 0, Y_MAX, X_BED - T_IN / 2, X_BED, "wall_bedroom", (door2,))
+    s += wall("wall_bedroom_bathroom_e", "y", 0, Y_MAX, X_BED, X_BED + T_IN / 2, "wall_bathroom", (door2,))
+    # doorways: door 1 opens into the living room (hinge on its north jamb), door 2 into the bedroom
+    s += doorway(d1, T_IN, leaf_into=0, hinge="left")
+    s += doorway(d2, T_IN, leaf_into=0, hinge="right")
+    s += doorway(front, T_EXT, leaf_into=None, hinge="left")
+    for name, axis, at, centre, width, z0, z1, outside in _WINDOWS:
+        s += window(name, axis, at, centre, width, z0, z1, outside)
+    return s
+
+
+def _living_room() -> list[Solid]:
+    s: list[Solid] = []
+    # kitchen along the north wall: base cabinets, worktop, tiled splash-back, stove, hood, wall cabinets
+    s.append(box("kitchen_cabinets", 0.0, 2.0, 3.02, Y_MAX, 0.0, 0.86, "cabinet"))
+    s.append(box("kitchen_worktop", 0.0, 2.0, 2.98, Y_MAX, 0.86, 0.90, "countertop"))
+    s.append(box("kitchen_splashback", 0.0, 2.0, Y_MAX - 0.012, Y_MAX, 0.90, 1.45, "kitchen_tiles", collide=False))
+    for i, x in enumerate((0.37, 1.63)):
+        s.append(box(f"kitchen_cabinet_handle_{i}", x - 0.08, x + 0.08, 2.995, 3.02, 0.72, 0.74, "chrome",
+                     collide=False))
+    s.append(box("stove_oven_door", 0.72, 1.28, 3.0, 3.02, 0.12, 0.72, "black", collide=False))
+    s.append(box("stove_oven_handle", 0.78, 1.22, 2.985, 3.0, 0.66, 0.68, "chrome", collide=False))
+    s.append(box("stove_top", 0.70, 1.30, 3.0, 3.58, 0.90, 0.915, "black"))
+    for i, (bx, by) in enumerate(((0.85, 3.15), (1.15, 3.15), (0.85, 3.43), (1.15, 3.43))):
+        s.append(cyl(f"stove_burner_{i}", bx, by, 0.915, 0.925, 0.075, "dark_grey", collide=False))
+    s.append(box("range_hood", 0.70, 1.30, 3.25, Y_MAX, 1.65, 1.95, "stainless"))
+    s.append(box("wall_cabinet_left", 0.0, 0.68, 3.25, Y_MAX, 1.50, 2.20, "cabinet"))
+    s.append(box("wall_cabinet_right", 1.32, 2.0, 3.25, Y_MAX, 1.50, 2.20, "cabinet"))
+    # refrigerator (target): tall, stainless, two doors with handles, facing south (-y)
+    fx0, fx1, fy0 = 2.08, 2.80, 2.90
+    s.append(box("refrigerator_body", fx0, fx1, fy0, Y_MAX - 0.02, 0.0, 1.85, "fridge", target=REFRIGERATOR))
+    s.append(box("refrigerator_door_gap", fx0, fx1, fy0 - 0.006, fy0, 1.24, 1.255, "dark_grey", collide=False,
+                 target=REFRIGERATOR))
+    for i, (z0, z1) in enumerate(((0.75, 1.18), (1.32, 1.62))):
+        s.append(box(f"refrigerator_handle_{i}", fx1 - 0.09, fx1 - 0.06, fy0 - 0.05, fy0, z0, z1, "chrome",
+                     target=REFRIGERATOR))
+    # TV on a low stand against the west wall, sofa facing it, coffee table and rug between
+    s.append(box("tv_stand", 0.0, 0.45, 1.0, 2.2, 0.0, 0.48, "wood"))
+    s.append(box("tv_body", 0.10, 0.16, 1.02, 2.18, 0.70, 1.38, "black"))
+    s.append(box("tv_screen", 0.16, 0.165, 1.05, 2.15, 0.73, 1.35, "tv_screen", collide=False))
+    s.append(box("tv_foot", 0.08, 0.30, 1.5, 1.7, 0.48, 0.70, "black"))
+    s.append(box("sofa_base", 2.0, 2.8, 0.90, 2.40, 0.10, 0.42, "sofa"))
+    s.append(box("sofa_seat", 2.05, 2.65, 1.05, 2.25, 0.42, 0.50, "sofa"))
+    s.append(box("sofa_back", 2.62, 2.85, 0.90, 2.40, 0.10, 0.88, "sofa"))
+    s.append(box("sofa_arm_south", 2.0, 2.85, 0.90, 1.05, 0.10, 0.62, "sofa"))
+    s.append(box("sofa_arm_north", 2.0, 2.85, 2.25, 2.40, 0.10, 0.62, "sofa"))
+    s.append(box("sofa_cushion_0", 2.48, 2.62, 1.15, 1.50, 0.50, 0.80, "cushion_red"))
+    s.append(box("sofa_cushion_1", 2.48, 2.62, 1.85, 2.18, 0.50, 0.80, "cushion_yellow"))
+    s.append(box("coffee_table_top", 0.95, 1.55, 1.25, 2.05, 0.38, 0.42, "wood"))
+    for i, (lx, ly) in enumerate(((1.0, 1.3), (1.5, 1.3), (1.0, 2.0), (1.5, 2.0))):
+        s.append(cyl(f"coffee_table_leg_{i}", lx, ly, 0.0, 0.38, 0.02, "dark_wood"))
+    s.append(box("rug_living", 0.65, 1.90, 0.90, 2.40, 0.0, 0.006, "rug", collide=False))
+    # bookshelf on the east wall, floor lamp, pot plant
+    s.append(box("bookshelf", 3.62, X_LIVING - T_IN / 2, 2.3, 3.3, 0.0, 1.9, "wood"))
+    s.append(box("bookshelf_books", 3.615, 3.62, 2.35, 3.25, 0.05, 1.85, "books", collide=False))
+    s.append(cyl("floor_lamp_pole", 3.3, 2.75, 0.0, 1.5, 0.015, "metal"))
+    s.append(cyl("floor_lamp_shade", 3.3, 2.75, 1.5, 1.75, 0.16, "lampshade"))
+    s.append(cyl("plant_pot", 0.25, 0.3, 0.0, 0.35, 0.14, "pot"))
+    s.append(ellipsoid("plant_leaves", 0.25, 0.3, 0.65, 0.25, 0.25, 0.35, "plant"))
+    return s
+
+
+def _bedroom() -> list[Solid]:
+    s: list[Solid] = []
+    # double bed, head against the north wall
+    s.append(box("bed_frame", 4.75, 6.15, 1.55, 3.55, 0.10, 0.32, "wood"))
+    for i, (lx, ly) in enumerate(((4.8, 1.6), (6.1, 1.6))):
+        s.append(box(f"bed_leg_{i}", lx - 0.04, lx + 0.04, ly - 0.04, ly + 0.04, 0.0, 0.10, "dark_wood"))
+    s.append(box("bed_headboard", 4.72, 6.18, 3.50, 3.58, 0.0, 1.05, "wood"))
+    s.append(box("bed_mattress", 4.78, 6.12, 1.58, 3.50, 0.32, 0.52, "mattress"))
+    s.append(box("bed_blanket", 4.74, 6.16, 1.54, 2.95, 0.30, 0.55, "blanket"))
+    s.append(ellipsoid("bed_pillow_left", 5.12, 3.22, 0.60, 0.28, 0.15, 0.08, "pillow"))
+    s.append(ellipsoid("bed_pillow_right", 5.78, 3.22, 0.60, 0.28, 0.15, 0.08, "pillow"))
+    # nightstands with lamps
+    for side, (x0, x1) in (("left", (4.28, 4.68)), ("right", (6.20, 6.54))):
+        s.append(box(f"nightstand_{side}", x0, x1, 3.15, 3.58, 0.0, 0.55, "wood"))
+        s.append(box(f"nightstand_{side}_drawer", x0 + 0.04, x1 - 0.04, 3.145, 3.15, 0.32, 0.48, "dark_wood",
+                     collide=False))
+        cx = (x0 + x1) / 2
+        s.append(cyl(f"bedside_lamp_{side}_base", cx, 3.38, 0.55, 0.78, 0.04, "metal"))
+        s.append(cyl(f"bedside_lamp_{side}_shade", cx, 3.38, 0.78, 0.96, 0.11, "lampshade"))
+    # wardrobe against the south wall
+    s.append(box("wardrobe", 4.40, 5.62, 0.0, 0.60, 0.0, 2.05, "wood"))
+    s.append(box("wardrobe_door_gap", 5.005, 5.015, 0.60, 0.606, 0.05, 2.0, "dark_wood", collide=False))
+    for i, x in enumerate((4.95, 5.07)):
+        s.append(box(f"wardrobe_handle_{i}", x - 0.01, x + 0.01, 0.60, 0.63, 0.9, 1.2, "chrome"))
+    # full-length mirror (target) on the east wall, facing west
+    mx = X_BED - T_IN / 2
+    s.append(box("mirror_frame", mx - 0.05, mx, 2.20, 3.00, 0.40, 2.00, "mirror_frame", target=MIRROR))
+    s.append(box("mirror_glass", mx - 0.06, mx - 0.05, 2.25, 2.95, 0.45, 1.95, "mirror_glass", target=MIRROR))
+    # a painting on the west wall and a rug beside the bed
+    s.append(box("bedroom_painting", X_LIVING + T_IN / 2, X_LIVING + T_IN / 2 + 0.02, 2.1, 3.0, 1.25, 1.85,
+                 "painting", collide=False))
+    s.append(box("rug_bedroom", 4.45, 4.72, 1.8, 3.0, 0.0, 0.006, "rug", collide=False))
+    return s
+
+
+def _bathroom() -> list[Solid]:
+    s: list[Solid] = []
+    wx = X_BATH  # east wall inner face
+    # vanity with a sink (target), faucet and a towel, against the east wall, facing west
+    s.append(box("vanity_cabinet", 8.08, wx, 1.50, 2.30, 0.0, 0.80, "painted_wood", target=SINK))
+    s.append(box("vanity_top", 8.04, wx, 1.48, 2.32, 0.80, 0.85, "marble", target=SINK))
+    s.append(cyl("sink_basin", 8.30, 1.90, 0.85, 0.91, 0.18, "ceramic", target=SINK))
+    s.append(cyl("sink_water", 8.30, 1.90, 0.91, 0.915, 0.14, "water", collide=False, target=SINK))
+    s.append(cyl("sink_faucet", 8.52, 1.90, 0.85, 1.05, 0.016, "chrome", target=SINK))
+    s.append(box("sink_spout", 8.40, 8.53, 1.89, 1.91, 1.02, 1.05, "chrome", target=SINK))
+    s.append(box("towel", 8.10, 8.14, 2.34, 2.60, 0.45, 0.84, "towel"))
+    # toilet against the south wall
+    s.append(box("toilet_tank", 7.72, 8.18, 0.02, 0.24, 0.40, 0.80, "ceramic"))
+    s.append(ellipsoid("toilet_bowl", 7.95, 0.48, 0.22, 0.19, 0.26, 0.22, "ceramic"))
+    s.append(box("toilet_seat", 7.78, 8.12, 0.26, 0.74, 0.40, 0.44, "ceramic"))
+    # bathtub along the north wall with a shower and a curtain
+    s.append(box("bathtub", 6.95, wx, 2.85, Y_MAX, 0.0, 0.55, "ceramic"))
+    s.append(box("bathtub_inside", 7.05, wx - 0.08, 2.93, Y_MAX - 0.08, 0.55, 0.56, "water", collide=False))
+    s.append(cyl("shower_pipe", 8.45, Y_MAX - 0.04, 0.55, 1.95, 0.015, "chrome"))
+    s.append(box("shower_head", 8.40, 8.50, Y_MAX - 0.16, Y_MAX - 0.02, 1.92, 1.97, "chrome"))
+    s.append(cyl("shower_rail", 6.95, 2.84, 1.95, 1.97, 0.01, "chrome", collide=False))
+    s.append(box("shower_curtain", 8.15, wx, 2.80, 2.86, 0.70, 1.95, "curtain"))
+    s.append(box("bath_mat", 7.2, 7.8, 2.35, 2.75, 0.0, 0.008, "bath_mat", collide=False))
+    return s
+
+
+_ROOMS = (
+    Room(LIVING_ROOM, "living room / kitchen", ((0, 0), (X_LIVING, 0), (X_LIVING, Y_MAX), (0, Y_MAX)),
+         aliases=("living room", "kitchen", "living room and kitchen", "living room or kitchen", "lounge",
+                  "living"), color=(0.45, 0.80, 0.45)),
+    Room(BEDROOM, "bedroom", ((X_LIVING, 0), (X_BED, 0), (X_BED, Y_MAX), (X_LIVING, Y_MAX)),
+         aliases=("bed room", "sleeping room"), color=(0.85, 0.40, 0.85)),
+    Room(BATHROOM, "bathroom", ((X_BED, 0), (X_BATH, 0), (X_BATH, Y_MAX), (X_BED, Y_MAX)),
+         aliases=("bath room", "restroom", "washroom", "toilet"), color=(0.95, 0.85, 0.30)),
+)
+_TARGETS = (
+    Target(REFRIGERATOR, "refrigerator", LIVING_ROOM, (2.44, 2.90, 0.95), -90.0, aliases=("fridge",)),
+    Target(MIRROR, "mirror", BEDROOM, (X_BED - T_IN / 2 - 0.06, 2.60, 1.20), 180.0,
+           aliases=("full-length mirror", "looking glass")),
+    Target(SINK, "sink", BATHROOM, (8.04, 1.90, 0.88), 180.0, aliases=("washbasin", "basin", "vanity")),
+)
+_SPAWNS = (
+    Spawn(LIVING_ROOM, LIVING_ROOM, Pose(3.25, 0.75, FLIGHT_Z, 135.0),
+          "living room, near the bedroom door, facing the sofa and the kitchen"),
+    Spawn(BEDROOM, BEDROOM, Pose(5.35, 1.05, FLIGHT_Z, 90.0), "bedroom, at the foot of the bed, facing it"),
+    Spawn(BATHROOM, BATHROOM, Pose(7.25, 1.75, FLIGHT_Z, -60.0), "bathroom, facing the toilet"),
+)
+
+
+@cache
+def cabin() -> Scene:
+    """The built-in cabin scene (cached: it is immutable)."""
+    return Scene(
+        name="cabin",
+        description="A compact wooden cabin: living room and kitchen (left), bedroom (centre), bathroom (right).",
+        rooms=_ROOMS,
+        doors=DOORS,
+        targets=_TARGETS,
+        spawns=_SPAWNS,
+        solids=tuple(_structure() + _living_room() + _bedroom() + _bathroom()),
+        materials=MATERIALS,
+        lights=(
+            Light("light_living", (2.0, 1.8, 2.35), (0.45, 0.42, 0.38), attenuation=(0.6, 0.15, 0.0)),
+            Light("light_bedroom", (5.3, 1.8, 2.35), (0.45, 0.42, 0.38), attenuation=(0.6, 0.15, 0.0)),
+            Light("light_bathroom", (7.6, 1.8, 2.35), (0.45, 0.45, 0.45), attenuation=(0.6, 0.15, 0.0)),
+        ),
+        bounds=((-T_EXT, -T_EXT), (X_BATH + T_EXT, Y_MAX + T_EXT)),
+        ceiling_height=WALL_H,
+        flight_altitude=FLIGHT_Z,
+    )

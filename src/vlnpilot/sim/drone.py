@@ -1,0 +1,79 @@
+"""The simulated DJI Tello: real size, propellers as collision geometry, front and rear cameras.
+
+Sizes from the Tello spec sheet: 98 x 92.5 x 41 mm including propellers and guards. The four propeller
+discs are separate collision geoms so that a propeller tip clipping a door frame is reported as such.
+"""
+
+from __future__ import annotations
+
+import math
+
+# -- names (one constants block for the robot) ----------------------------------------------------
+BODY = "drone"
+JOINT = "drone_free"
+FRONT_CAMERA, REAR_CAMERA = "front", "rear"
+PROPELLERS = ("prop_front_left", "prop_front_right", "prop_rear_left", "prop_rear_right")
+HULL = "drone_hull"
+
+# -- dimensions (metres) ---------------------------------------------------------------------------
+LENGTH, WIDTH, HEIGHT = 0.098, 0.0925, 0.041
+PROP_RADIUS = 0.0212
+PROP_X = LENGTH / 2 - PROP_RADIUS  # rotor centres so that the tips reach the spec-sheet outline
+PROP_Y = WIDTH / 2 - PROP_RADIUS
+PROP_Z = HEIGHT / 2 - 0.004
+PROP_HALF_THICKNESS = 0.004
+HULL_HALF = (0.034, 0.021, 0.0165)
+BOUNDING_RADIUS = math.hypot(LENGTH / 2, WIDTH / 2)  # horizontal, for quick clearance checks
+
+# -- cameras ---------------------------------------------------------------------------------------
+DIAGONAL_FOV_DEG = 82.6  # Tello camera
+ASPECT = 4 / 3
+
+
+def vertical_fov_deg(diagonal_deg: float = DIAGONAL_FOV_DEG, aspect: float = ASPECT) -> float:
+    """Vertical field of view of a camera with the given diagonal FOV and aspect ratio."""
+    half_diag = math.tan(math.radians(diagonal_deg) / 2)
+    return math.degrees(2 * math.atan(half_diag / math.hypot(aspect, 1)))
+
+
+def horizontal_fov_deg(diagonal_deg: float = DIAGONAL_FOV_DEG, aspect: float = ASPECT) -> float:
+    half_diag = math.tan(math.radians(diagonal_deg) / 2)
+    return math.degrees(2 * math.atan(half_diag * aspect / math.hypot(aspect, 1)))
+
+
+FRONT_FOVY = vertical_fov_deg()
+REAR_CAMERA_POS = (-0.55, 0.0, 0.30)  # chase view: behind and above, looking at the drone
+REAR_FOVY = 60.0
+
+DRONE_CONTYPE, DRONE_CONAFFINITY = 2, 1  # collides with world geoms (see scene.mjcf)
+
+
+def drone_assets_xml() -> str:
+    return """<material name="drone_shell" rgba="0.92 0.92 0.90 1" specular="0.5" shininess="0.5"/>
+    <material name="drone_prop" rgba="0.15 0.15 0.17 0.85" specular="0.3"/>
+    <material name="drone_lens" rgba="0.05 0.05 0.08 1" specular="0.9" shininess="0.9"/>"""
+
+
+def drone_body_xml() -> str:
+    """The drone body with a free joint; its pose is set kinematically by the simulator."""
+    col = f'contype="{DRONE_CONTYPE}" conaffinity="{DRONE_CONAFFINITY}" group="2"'
+    hx, hy, hz = HULL_HALF
+    props = []
+    for name in PROPELLERS:
+        sx = PROP_X if "front" in name else -PROP_X
+        sy = PROP_Y if "left" in name else -PROP_Y
+        props.append(
+            f'<geom name="{name}" type="cylinder" size="{PROP_RADIUS:.4f} {PROP_HALF_THICKNESS:.4f}" '
+            f'pos="{sx:.4f} {sy:.4f} {PROP_Z:.4f}" material="drone_prop" {col}/>'
+        )
+    # The camera looks along its -z axis; xyaxes gives its image x (right) and y (up) in the body frame.
+    rx, _, rz = REAR_CAMERA_POS
+    return f"""<body name="{BODY}" pos="0 0 1">
+      <freejoint name="{JOINT}"/>
+      <geom name="{HULL}" type="box" size="{hx} {hy} {hz}" material="drone_shell" mass="0.08" {col}/>
+      {chr(10).join('      ' + p for p in props).strip()}
+      <geom name="drone_lens" type="cylinder" size="0.006 0.002" pos="{hx + 0.001:.4f} 0 0" euler="0 1.5708 0"
+            material="drone_lens" contype="0" conaffinity="0" group="2"/>
+      <camera name="{FRONT_CAMERA}" pos="{LENGTH / 2 + 0.002:.4f} 0 0" xyaxes="0 -1 0 0 0 1" fovy="{FRONT_FOVY:.3f}"/>
+      <camera name="{REAR_CAMERA}" pos="{rx} 0 {rz}" xyaxes="0 -1 0 {rz} 0 {-rx}" fovy="{REAR_FOVY}"/>
+    </body>"""

@@ -1,0 +1,55 @@
+"""Privileged queries on the simulator through the narrow `GroundTruth` interface (monitors, oracle only)."""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+from vlnpilot.scene import Scene
+from vlnpilot.types import Pose, wrap_deg
+
+if TYPE_CHECKING:
+    from vlnpilot.sim.simulator import Simulator
+
+VISIBLE_MIN_FRACTION = 0.004  # share of the (low-resolution) front image a target must cover to count as seen
+
+
+class SimGroundTruth:
+    """Ground truth read from the simulator; it exposes facts, never the simulator object itself."""
+
+    def __init__(self, sim: Simulator, visible_min_fraction: float = VISIBLE_MIN_FRACTION):
+        self._sim = sim
+        self._min_fraction = visible_min_fraction
+        self._cache: dict[tuple[int, Pose, str], float] = {}
+
+    @property
+    def scene(self) -> Scene:
+        return self._sim.scene
+
+    def pose(self) -> Pose:
+        return self._sim.pose
+
+    def room(self) -> str | None:
+        p = self._sim.pose
+        return self.scene.room_at(p.x, p.y)
+
+    def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
+        t = self.scene.target(target_id)
+        p = self._sim.pose
+        dx, dy = t.position[0] - p.x, t.position[1] - p.y
+        return math.hypot(dx, dy), wrap_deg(math.degrees(math.atan2(dy, dx)) - p.yaw_deg)
+
+    def target_pixel_fraction(self, target_id: str) -> float:
+        key = (self._sim.step_count, self._sim.pose, target_id)
+        if key not in self._cache:
+            self._cache = {key: self._sim.target_pixel_fraction(target_id)}
+        return self._cache[key]
+
+    def target_visible(self, target_id: str) -> bool:
+        return self.target_pixel_fraction(target_id) >= self._min_fraction
+
+    def contact_at(self, pose: Pose) -> str | None:
+        """The scene geom the drone would touch at `pose` (for the geometry safety shield), else None."""
+        hit = self._sim.contact_at(pose)
+        self._sim.contact_at(self._sim.pose)  # restore the model's kinematic state
+        return hit[0] if hit else None

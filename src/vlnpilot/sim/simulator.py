@@ -1,0 +1,263 @@
+"""The embedded MuJoCo simulator: a kinematic Tello in a furnished scene, rendered headless.
+
+The drone is moved kinematically, as the paper's commands are discrete displacements: each motion is
+executed in small sub-steps with a collision check against all scene geometry; at the first contact the
+drone stops at the last free pose (refined by bisection), so it never penetrates anything.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+from vlnpilot.sim import gl  # noqa: F401  (selects the headless GL backend before mujoco is imported)
+
+import mujoco  # noqa: E402
+import numpy as np  # noqa: E402
+
+from vlnpilot.commands import Command, get_command  # noqa: E402
+from vlnpilot.errors import ConfigError, UnknownNameError  # noqa: E402
+from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
+from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
+from vlnpilot.sim import drone  # noqa: E402
+from vlnpilot.types import Motion, Observation, Pose  # noqa: E402
+
+MAX_RESOLUTION = (960, 720)
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Simulator settings. Sub-step sizes bound how far a motion can go between two collision checks."""
+
+    width: int = 640
+    height: int = 480
+    rear_width: int = 640
+    rear_height: int = 480
+    render: bool = True  # False: observations carry 1x1 black images (fast, for image-free pilots)
+    substep_m: float = 0.02
+    substep_deg: float = 4.0
+    bisect_iterations: int = 6
+    spawn_jitter_m: float = 0.0  # seeded random offset of the spawn position (per repetition variety)
+    spawn_jitter_deg: float = 0.0
+    shadows: bool = False  # MuJoCo's shadow map costs ~10x a frame on a CPU
+    visibility_width: int = 160  # segmentation render used by the ground truth
+    visibility_height: int = 120
+
+    def __post_init__(self) -> None:
+        for w, h, what in ((self.width, self.height, "front camera"), (self.rear_width, self.rear_height, "rear camera")):
+            if not (16 <= w <= MAX_RESOLUTION[0] and 16 <= h <= MAX_RESOLUTION[1]):
+                raise ConfigError(f"{what} resolution {w}x{h} is outside 16x16..{MAX_RESOLUTION[0]}x{MAX_RESOLUTION[1]}")
+        if self.substep_m <= 0 or self.substep_deg <= 0:
+            raise ConfigError("substep sizes must be positive")
+
+
+def yaw_quat(yaw_deg: float) -> np.ndarray:
+    half = math.radians(yaw_deg) / 2
+    return np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+
+
+class Simulator:
+    """Implements the Environment contract: `reset(spawn, seed)`, `step(command)`, `scene`."""
+
+    def __init__(self, scene: str | Scene = "cabin", config: SimConfig | None = None):
+        self.scene: Scene = load_scene(scene)
+        self.config = config or SimConfig()
+        xml, assets = scene_to_mjcf(self.scene, bodies=drone.drone_body_xml(), assets_xml=drone.drone_assets_xml(),
+                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows)
+        self.model = mujoco.MjModel.from_xml_string(xml, assets)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._qpos_adr = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, drone.JOINT)]
+        body_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, drone.BODY)
+        self.drone_geoms = frozenset(int(g) for g in np.flatnonzero(m.geom_bodyid == body_id))
+        self._geom_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}" for g in range(m.ngeom)]
+        self.target_geoms = {
+            t.id: frozenset(g for g, n in enumerate(self._geom_names) if n in self._target_solid_names(t.id))
+            for t in self.scene.targets
+        }
+        self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
+        self._seg_renderer: mujoco.Renderer | None = None
+        self._pose = Pose(0.0, 0.0, self.scene.flight_altitude, 0.0)
+        self._step = 0
+        self._rng = np.random.default_rng(0)
+        self.seed: int | None = None
+        self.spawn: Spawn | None = None
+
+    def _target_solid_names(self, target_id: str) -> set[str]:
+        return {s.name for s in self.scene.solids if s.target == target_id}
+
+    # -- pose and collision ------------------------------------------------------------------------
+    @property
+    def pose(self) -> Pose:
+        return self._pose
+
+    @property
+    def step_count(self) -> int:
+        return self._step
+
+    def geom_name(self, geom_id: int) -> str:
+        return self._geom_names[geom_id]
+
+    def _set_qpos(self, pose: Pose) -> None:
+        a = self._qpos_adr
+        self.data.qpos[a : a + 3] = (pose.x, pose.y, pose.z)
+        self.data.qpos[a + 3 : a + 7] = yaw_quat(pose.yaw_deg)
+
+    def contact_at(self, pose: Pose) -> tuple[str, str] | None:
+        """(world geom, drone part) of the deepest contact if the drone at `pose` touches the scene, else None."""
+        self._set_qpos(pose)
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_collision(self.model, self.data)
+        best: tuple[float, int, int] | None = None
+        for c in self.data.contact[: self.data.ncon]:
+            g1, g2 = int(c.geom1), int(c.geom2)
+            if (g1 in self.drone_geoms) == (g2 in self.drone_geoms) or c.dist >= 0:
+                continue
+            world, part = (g2, g1) if g1 in self.drone_geoms else (g1, g2)
+            if best is None or c.dist < best[0]:
+                best = (float(c.dist), world, part)
+        if best is None:
+            return None
+        return self._geom_names[best[1]], self._geom_names[best[2]]
+
+    def sweep(self, start: Pose, motion: Motion) -> tuple[Pose, tuple[str, str] | None]:
+        """Execute `motion` from `start` in sub-steps; stop at the last free pose before the first contact."""
+        cfg = self.config
+        trans = math.hypot(motion.forward_m, motion.lateral_m) + abs(motion.vertical_m)
+        n = max(1, math.ceil(trans / cfg.substep_m), math.ceil(abs(motion.yaw_deg) / cfg.substep_deg))
+        free = 0.0
+        for i in range(1, n + 1):
+            frac = i / n
+            hit = self.contact_at(motion.apply(start, frac))
+            if hit is None:
+                free = frac
+                continue
+            lo, hi = free, frac  # lo is free, hi collides: bisect for the last free pose
+            for _ in range(cfg.bisect_iterations):
+                mid = (lo + hi) / 2
+                mid_hit = self.contact_at(motion.apply(start, mid))
+                if mid_hit is None:
+                    lo = mid
+                else:
+                    hi, hit = mid, mid_hit
+            return motion.apply(start, lo), hit
+        return motion.apply(start, 1.0), None
+
+    # -- Environment contract --------------------------------------------------------------------------
+    def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:
+        """Place the drone at a spawn (name, Spawn or Pose) at flight altitude; `seed` drives spawn jitter."""
+        if spawn is None:
+            spawn = self.scene.spawns[0]
+        if isinstance(spawn, str):
+            spawn = self.scene.spawn(spawn)
+        pose = spawn.pose if isinstance(spawn, Spawn) else spawn
+        self.spawn = spawn if isinstance(spawn, Spawn) else None
+        self.seed = seed
+        self._rng = np.random.default_rng(seed)
+        cfg = self.config
+        if cfg.spawn_jitter_m or cfg.spawn_jitter_deg:
+            dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
+            dyaw = self._rng.uniform(-cfg.spawn_jitter_deg, cfg.spawn_jitter_deg)
+            pose = replace(pose, x=pose.x + dx, y=pose.y + dy, yaw_deg=pose.yaw_deg + dyaw)
+        hit = self.contact_at(pose)
+        if hit is not None:
+            raise ConfigError(f"spawn pose {pose.as_dict()} touches {hit[0]}")
+        self._pose, self._step = pose, 0
+        return self._observe(collided=False, contact=None)
+
+    def step(self, command: Command | str) -> Observation:
+        """Execute one command of the table (A1...E) and observe."""
+        cmd = command if isinstance(command, Command) else get_command(command)
+        return self.move(cmd.motion())
+
+    def move(self, motion: Motion) -> Observation:
+        """Execute an arbitrary body-frame motion with the collision sweep (the real Tello's `go`)."""
+        if not isinstance(motion, Motion):
+            raise ConfigError(f"expected a Motion, got {type(motion).__name__}")
+        for v in (motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg):
+            if not math.isfinite(v):
+                raise ConfigError(f"refusing a non-finite motion: {motion}")
+        pose, hit = self.sweep(self._pose, motion)
+        self._pose = pose
+        self._step += 1
+        return self._observe(collided=hit is not None, contact=hit)
+
+    def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
+        self._set_qpos(self._pose)
+        mujoco.mj_forward(self.model, self.data)
+        front = self.render(drone.FRONT_CAMERA)
+        rear = self.render(drone.REAR_CAMERA)
+        return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
+                           contact=contact[0] if contact else None, step=self._step,
+                           contact_part=contact[1] if contact else None)
+
+    # -- rendering ------------------------------------------------------------------------------------------
+    def _renderer(self, width: int, height: int) -> mujoco.Renderer:
+        key = (width, height)
+        if key not in self._renderers:
+            try:
+                self._renderers[key] = mujoco.Renderer(self.model, height, width)
+            except Exception as exc:  # the GL stack raises many kinds; report one clear error
+                raise gl.backend_error(exc) from exc
+        return self._renderers[key]
+
+    def render(self, camera: str = drone.FRONT_CAMERA, width: int | None = None, height: int | None = None,
+               depth: bool = False) -> np.ndarray:
+        """RGB (HxWx3 uint8) or depth (HxW float32, metres) image from a named camera at the current pose."""
+        cfg = self.config
+        if not cfg.render and not depth:
+            return np.zeros((1, 1, 3), np.uint8)
+        front = camera == drone.FRONT_CAMERA
+        w = width or (cfg.width if front else cfg.rear_width)
+        h = height or (cfg.height if front else cfg.rear_height)
+        r = self._renderer(w, h)
+        if depth:
+            r.enable_depth_rendering()
+        try:
+            r.update_scene(self.data, camera=camera)
+            return r.render().copy()
+        finally:
+            if depth:
+                r.disable_depth_rendering()
+
+    def segmentation(self, camera: str = drone.FRONT_CAMERA) -> np.ndarray:
+        """Per-pixel geom ids (-1 for background) of a low-resolution render, for visibility queries."""
+        cfg = self.config
+        if self._seg_renderer is None:
+            try:
+                self._seg_renderer = mujoco.Renderer(self.model, cfg.visibility_height, cfg.visibility_width)
+            except Exception as exc:
+                raise gl.backend_error(exc) from exc
+            self._seg_renderer.enable_segmentation_rendering()
+        self._set_qpos(self._pose)
+        mujoco.mj_forward(self.model, self.data)
+        self._seg_renderer.update_scene(self.data, camera=camera)
+        seg = self._seg_renderer.render()
+        ids = seg[..., 0].astype(np.int32)
+        ids[seg[..., 1] != int(mujoco.mjtObj.mjOBJ_GEOM)] = -1
+        return ids
+
+    def target_pixel_fraction(self, target_id: str) -> float:
+        if target_id not in self.target_geoms:
+            raise UnknownNameError("target", target_id, self.target_geoms)
+        ids = self.segmentation()
+        return float(np.isin(ids, list(self.target_geoms[target_id])).mean())
+
+    def ground_truth(self):  # -> SimGroundTruth; imported lazily to keep the module graph simple
+        from vlnpilot.sim.ground_truth import SimGroundTruth
+
+        return SimGroundTruth(self)
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        if self._seg_renderer is not None:
+            self._seg_renderer.close()
+        self._renderers.clear()
+        self._seg_renderer = None
+
+    def __enter__(self) -> Simulator:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

@@ -1,0 +1,109 @@
+"""Core immutable records shared by every layer: poses, motions, observations."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Protocol, runtime_checkable
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from vlnpilot.scene.model import Scene
+
+
+@dataclass(frozen=True)
+class Pose:
+    """World-frame pose: metres, z up, yaw in degrees counter-clockwise from +x."""
+
+    x: float
+    y: float
+    z: float
+    yaw_deg: float
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "z", "yaw_deg"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"Pose.{name} must be finite, got {getattr(self, name)!r}")
+
+    @property
+    def yaw_rad(self) -> float:
+        return math.radians(self.yaw_deg)
+
+    def heading(self) -> tuple[float, float]:
+        """Unit vector the drone faces, in the horizontal plane."""
+        return math.cos(self.yaw_rad), math.sin(self.yaw_rad)
+
+    def distance_xy(self, other: Pose) -> float:
+        return math.hypot(self.x - other.x, self.y - other.y)
+
+    def as_dict(self) -> dict[str, float]:
+        return {"x": round(self.x, 4), "y": round(self.y, 4), "z": round(self.z, 4), "yaw_deg": round(self.yaw_deg, 3)}
+
+
+def wrap_deg(angle: float) -> float:
+    """Wrap an angle to (-180, 180]."""
+    a = (angle + 180.0) % 360.0 - 180.0
+    return 180.0 if a == -180.0 else a
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A body-frame displacement: forward (+x body), lateral (+ = left), vertical, yaw (+ = left/CCW)."""
+
+    forward_m: float = 0.0
+    lateral_m: float = 0.0
+    vertical_m: float = 0.0
+    yaw_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("forward_m", "lateral_m", "vertical_m", "yaw_deg"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"Motion.{name} must be finite, got {getattr(self, name)!r}")
+
+    @property
+    def is_null(self) -> bool:
+        return self.forward_m == self.lateral_m == self.vertical_m == self.yaw_deg == 0.0
+
+    def apply(self, pose: Pose, fraction: float = 1.0) -> Pose:
+        """The pose reached after `fraction` of this motion (translation in the start heading, then yaw)."""
+        c, s = pose.heading()
+        f, l = self.forward_m * fraction, self.lateral_m * fraction
+        return Pose(
+            pose.x + f * c - l * s,
+            pose.y + f * s + l * c,
+            pose.z + self.vertical_m * fraction,
+            wrap_deg(pose.yaw_deg + self.yaw_deg * fraction),
+        )
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the drone senses after a reset or a step. Images are HxWx3 uint8 arrays."""
+
+    front_rgb: np.ndarray = field(repr=False)
+    rear_rgb: np.ndarray = field(repr=False)
+    pose: Pose
+    collided: bool = False
+    contact: str | None = None  # what the drone touched, e.g. 'door_living_bedroom_frame_left'
+    step: int = 0
+    contact_part: str | None = None  # which part of the drone touched it, e.g. 'prop_front_left'
+
+
+@runtime_checkable
+class GroundTruth(Protocol):
+    """Privileged facts about the world, for monitors and privileged pilots only (never model pilots)."""
+
+    @property
+    def scene(self) -> Scene: ...
+
+    def pose(self) -> Pose: ...
+
+    def room(self) -> str | None:
+        """Id of the room the drone is in, or None (inside a wall or doorway)."""
+
+    def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
+        """Horizontal distance (m) from the drone to the target, and its bearing (deg, + = left of heading)."""
+
+    def target_visible(self, target_id: str) -> bool:
+        """Whether the target occupies enough pixels of the front camera (segmentation render)."""
