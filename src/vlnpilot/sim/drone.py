@@ -6,7 +6,17 @@ discs are separate collision geoms so that a propeller tip clipping a door frame
 
 from __future__ import annotations
 
-import math
+from vlnpilot.tello_spec import (  # noqa: F401  (re-exported for the simulator)
+    DIAGONAL_FOV_DEG,
+    HEIGHT,
+    LENGTH,
+    PROP_RADIUS,
+    PROP_X,
+    PROP_Y,
+    WIDTH,
+    horizontal_fov_deg,
+    vertical_fov_deg,
+)
 
 # -- names (one constants block for the robot) ----------------------------------------------------
 BODY = "drone"
@@ -15,31 +25,11 @@ FRONT_CAMERA, REAR_CAMERA = "front", "rear"
 PROPELLERS = ("prop_front_left", "prop_front_right", "prop_rear_left", "prop_rear_right")
 HULL = "drone_hull"
 
-# -- dimensions (metres) ---------------------------------------------------------------------------
-LENGTH, WIDTH, HEIGHT = 0.098, 0.0925, 0.041
-PROP_RADIUS = 0.0212
-PROP_X = LENGTH / 2 - PROP_RADIUS  # rotor centres so that the tips reach the spec-sheet outline
-PROP_Y = WIDTH / 2 - PROP_RADIUS
+# -- dimensions (metres), from the spec sheet -------------------------------------------------------
 PROP_Z = HEIGHT / 2 - 0.004
 PROP_HALF_THICKNESS = 0.004
 HULL_HALF = (0.034, 0.021, 0.0165)
-BOUNDING_RADIUS = math.hypot(LENGTH / 2, WIDTH / 2)  # horizontal, for quick clearance checks
-
-# -- cameras ---------------------------------------------------------------------------------------
-DIAGONAL_FOV_DEG = 82.6  # Tello camera
-ASPECT = 4 / 3
-
-
-def vertical_fov_deg(diagonal_deg: float = DIAGONAL_FOV_DEG, aspect: float = ASPECT) -> float:
-    """Vertical field of view of a camera with the given diagonal FOV and aspect ratio."""
-    half_diag = math.tan(math.radians(diagonal_deg) / 2)
-    return math.degrees(2 * math.atan(half_diag / math.hypot(aspect, 1)))
-
-
-def horizontal_fov_deg(diagonal_deg: float = DIAGONAL_FOV_DEG, aspect: float = ASPECT) -> float:
-    half_diag = math.tan(math.radians(diagonal_deg) / 2)
-    return math.degrees(2 * math.atan(half_diag * aspect / math.hypot(aspect, 1)))
-
+HULL_Z = -HEIGHT / 2 + HULL_HALF[2]  # hull bottom at the spec-sheet outline; props on top
 
 FRONT_FOVY = vertical_fov_deg()
 REAR_CAMERA_POS = (-0.55, 0.0, 0.30)  # chase view: behind and above, looking at the drone
@@ -70,7 +60,8 @@ def drone_body_xml() -> str:
     rx, _, rz = REAR_CAMERA_POS
     return f"""<body name="{BODY}" pos="0 0 1">
       <freejoint name="{JOINT}"/>
-      <geom name="{HULL}" type="box" size="{hx} {hy} {hz}" material="drone_shell" mass="0.08" {col}/>
+      <geom name="{HULL}" type="box" size="{hx} {hy} {hz}" pos="0 0 {HULL_Z:.4f}" material="drone_shell"
+            mass="0.08" {col}/>
       {chr(10).join('      ' + p for p in props).strip()}
       <geom name="drone_lens" type="cylinder" size="0.006 0.002" pos="{hx + 0.001:.4f} 0 0" euler="0 1.5708 0"
             material="drone_lens" contype="0" conaffinity="0" group="2"/>

@@ -1,0 +1,153 @@
+"""The `vln-pilot` command line: thin wrappers over library functions (no logic a library user would need)."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.console import Console
+
+from vlnpilot.errors import VLNPilotError
+
+app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
+                  add_completion=False, pretty_exceptions_enable=False)
+scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True)
+app.add_typer(scene_app, name="scene")
+console = Console(soft_wrap=True)
+err_console = Console(stderr=True)
+
+SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name.")]
+OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
+
+
+def default_pilot_spec(env: dict[str, str] | None = None) -> tuple[str, str]:
+    """The pilot to use when none is given, and why: OpenAI, then Gemini when their keys are set, else the oracle."""
+    env = dict(os.environ) if env is None else env
+    if env.get("OPENAI_API_KEY"):
+        return "openai", "OPENAI_API_KEY is set"
+    if env.get("GEMINI_API_KEY") or env.get("GOOGLE_API_KEY"):
+        return "gemini", "GEMINI_API_KEY or GOOGLE_API_KEY is set"
+    return "oracle", "no OPENAI_API_KEY, GEMINI_API_KEY or GOOGLE_API_KEY is set, so the ground-truth oracle flies"
+
+
+@scene_app.command("info")
+def scene_info(scene: SceneOpt = "cabin", as_json: Annotated[bool, typer.Option("--json")] = False) -> None:
+    """Rooms, doors, targets, spawns and the topological map."""
+    from vlnpilot.scene import load_scene
+
+    info = load_scene(scene).info()
+    if as_json:
+        print(json.dumps(info, indent=2))
+        return
+    console.print(f"[bold]{info['name']}[/bold]: {info['description']}")
+    console.print("[bold]rooms[/bold]: " + ", ".join(f"{r['id']} ({r['name']})" for r in info["rooms"]))
+    for d in info["doors"]:
+        state = "open" if d["open"] else "closed"
+        console.print(f"[bold]door[/bold] {d['id']}: {' - '.join(d['rooms'])}, {d['width_m']:.2f} m wide, {state}")
+    for t in info["targets"]:
+        console.print(f"[bold]target[/bold] {t['id']} in {t['room']} (aliases: {', '.join(t['aliases'])})")
+    for s in info["spawns"]:
+        p = s["pose"]
+        console.print(f"[bold]spawn[/bold] {s['id']}: ({p['x']:.2f}, {p['y']:.2f}, {p['z']:.2f}) "
+                      f"yaw {p['yaw_deg']:.0f}° - {s['description']}")
+    console.print("[bold]topological map[/bold]:")
+    console.print_json(data=info["topological_map"])
+
+
+@scene_app.command("render")
+def scene_render(scene: SceneOpt = "cabin",
+                 spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
+                 out: OutOpt = None,
+                 width: Annotated[int, typer.Option(min=16, max=960)] = 640,
+                 height: Annotated[int, typer.Option(min=16, max=720)] = 480) -> None:
+    """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan."""
+    from PIL import Image
+
+    from vlnpilot.record import check_writable
+    from vlnpilot.report.floorplan import save_floorplan
+    from vlnpilot.sim import SimConfig, Simulator
+
+    with Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height)) as sim:
+        spawn_id = spawn or sim.scene.spawns[0].id
+        sim.scene.spawn(spawn_id)  # validate before creating the output directory
+        out_dir = check_writable(out or Path("runs") / f"scene-{sim.scene.name}-{spawn_id}")
+        obs = sim.reset(spawn_id)
+        Image.fromarray(obs.front_rgb).save(out_dir / "front.png")
+        Image.fromarray(obs.rear_rgb).save(out_dir / "rear.png")
+        save_floorplan(sim.scene, out_dir / "map.png")
+    console.print(f"wrote {out_dir}/front.png, rear.png and map.png")
+
+
+@app.command("run")
+def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to the bathroom".')],
+        scene: SceneOpt = "cabin",
+        spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
+        pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC: name or name:model.")] = None,
+        max_steps: Annotated[int, typer.Option("--max-steps", min=1, help="Step limit.")] = 50,
+        seed: Annotated[int | None, typer.Option("--seed")] = None,
+        out: OutOpt = None,
+        base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
+        profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
+        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False) -> None:
+    """Fly one episode on the embedded simulator and record it."""
+    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.record import Recorder, check_writable, default_run_dir
+    from vlnpilot.scene import load_scene
+    from vlnpilot.sim import Simulator
+    from vlnpilot.tasks import parse_query
+
+    sc = load_scene(scene)
+    spawn_id = spawn or sc.spawns[0].id
+    sc.spawn(spawn_id)
+    task = parse_query(query, sc)
+    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile)
+    if pilot is None:
+        pilot, why = default_pilot_spec()
+        console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
+    options = {"base_url": base_url} if base_url else {}
+    pilot_obj = make_pilot(pilot, **options)
+    run_dir = check_writable(out or default_run_dir("runs", f"{spawn_id}-{query}"))
+
+    def show(rec: dict) -> None:
+        if quiet:
+            return
+        d = rec["decision"] or {}
+        fail = f" [red]({len(rec['failures'])} rejected)[/red]" if rec["failures"] else ""
+        hit = f" [bold red]COLLISION with {rec['contact']}[/bold red]" if rec["collided"] else ""
+        console.print(f"[dim]{rec['step']:>3}[/dim] {rec['state']:<27} [bold]{rec['executed'] or '-':<2}[/bold] "
+                      f"-> {rec['next_state'] or '-':<27} room={d.get('room', '?'):<12}{fail}{hit} "
+                      f"[dim]{(d.get('description') or '')[:70]}[/dim]", highlight=False)
+
+    with Simulator(sc) as env:
+        recorder = Recorder(run_dir)
+        try:
+            result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
+                                 pilot_spec=pilot)
+        finally:
+            recorder.close()
+    colour = "green" if result.success else "red"
+    console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
+                  f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
+                  f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
+    console.print(f"run directory: {run_dir}")
+
+
+def main() -> None:
+    """Entry point: bad input becomes one clear line on stderr and exit code 2, never a traceback."""
+    try:
+        app()
+    except VLNPilotError as exc:
+        err_console.print(f"[bold red]error:[/bold red] {exc}", highlight=False)
+        sys.exit(2)
+    except KeyboardInterrupt:
+        err_console.print("interrupted: every step recorded so far is kept")
+        sys.exit(130)
+
+
+if __name__ == "__main__":
+    main()

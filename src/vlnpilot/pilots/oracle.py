@@ -1,0 +1,212 @@
+"""The oracle: a privileged pilot that reads ground truth and answers in exactly the model's protocol.
+
+It walks the same FSM with the same commands as a model would (only the moves each state allows), so it
+is the upper bound in every table and the proof that scene, commands, FSM and monitor agree.
+Strategy per state: recognise (rotate towards the next waypoint), line up on the doorway's centre line
+at an approach point, cross it with A1 moves, move into the new room, and for objects fly to a viewing
+point on the object's facing axis and turn to face it.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import ClassVar
+
+from vlnpilot.commands import COMMANDS, Kind
+from vlnpilot.errors import VLNPilotError
+from vlnpilot.fsm import State, state_spec
+from vlnpilot.pilots.base import Decision, PilotInput, register_pilot
+from vlnpilot.scene.model import Door
+from vlnpilot.tasks import SuccessConfig, Task, parse_query
+from vlnpilot.tello_spec import horizontal_fov_deg
+from vlnpilot.types import GroundTruth, Pose, wrap_deg
+
+ALIGN_DEG = 7.5  # half of the smallest rotation: closer than this cannot be improved
+HALF_HFOV = horizontal_fov_deg() / 2
+
+
+def _bearing(pose: Pose, x: float, y: float) -> float:
+    return wrap_deg(math.degrees(math.atan2(y - pose.y, x - pose.x)) - pose.yaw_deg)
+
+
+def _rotation(error_deg: float, allowed: tuple[str, ...]) -> str | None:
+    """The allowed rotation that best reduces a heading error (+ = target to the left), or None."""
+    best, best_left = None, abs(error_deg)
+    for code in allowed:
+        c = COMMANDS[code]
+        if not c.is_rotation:
+            continue
+        signed = c.amount if c.kind is Kind.ROTATE_LEFT else -c.amount
+        left = abs(error_deg - signed)
+        if left < best_left - 1e-9:
+            best, best_left = code, left
+    return best
+
+
+def _signed(code: str) -> float:
+    c = COMMANDS[code]
+    return c.amount if c.kind is Kind.ROTATE_LEFT else -c.amount if c.kind is Kind.ROTATE_RIGHT else 0.0
+
+
+@register_pilot("oracle")
+class OraclePilot:
+    """Privileged pilot: `attach(ground_truth)` before the first `decide`."""
+
+    name = "oracle"
+    privileged: ClassVar[bool] = True
+
+    def __init__(self, model: str | None = None, approach_m: float = 0.45, cross_m: float = 0.35,
+                 view_m: float = 0.7, lateral_tol_m: float = 0.05, success: SuccessConfig | None = None):
+        self.model = model or "ground-truth"
+        self.approach_m, self.cross_m, self.view_m, self.lateral_tol_m = approach_m, cross_m, view_m, lateral_tol_m
+        self.success = success or SuccessConfig()
+        self._gt: GroundTruth | None = None
+        self._task: Task | None = None
+        self._room: str | None = None
+
+    def attach(self, ground_truth: GroundTruth) -> None:
+        self._gt, self._task, self._room = ground_truth, None, None
+
+    # -- geometry helpers ----------------------------------------------------------------------------
+    def _next_door(self, room: str, goal: str) -> tuple[Door, tuple[float, float]] | None:
+        """The door to cross next on the way to `goal`, and its normal pointing away from `room`."""
+        scene = self._gt.scene
+        if room == goal:
+            return None
+        path = scene.room_path(room, goal)
+        door = scene.doors_between(path[0], path[1])[0]
+        nx, ny = door.normal
+        return (door, (nx, ny)) if door.rooms[0] == room else (door, (-nx, -ny))
+
+    def _viewing_point(self) -> tuple[float, float]:
+        t = self._gt.scene.target(self._task.goal_target)
+        a = math.radians(t.facing_deg)
+        return t.position[0] + self.view_m * math.cos(a), t.position[1] + self.view_m * math.sin(a)
+
+    def _goto(self, pose: Pose, x: float, y: float, allowed: tuple[str, ...]) -> str:
+        """Rotate towards (x, y) if needed, else fly the longest allowed forward move that does not overshoot."""
+        dist, err = math.hypot(x - pose.x, y - pose.y), _bearing(pose, x, y)
+        # Turn only when flying on would miss the point by more than a few centimetres (no zig-zag).
+        miss = dist * math.sin(math.radians(min(abs(err), 90.0)))
+        if abs(err) > ALIGN_DEG and (miss > 0.06 or abs(err) > 45.0) and (rot := _rotation(err, allowed)):
+            return rot
+        forwards = sorted((c for c in allowed if COMMANDS[c].kind is Kind.FORWARD), key=lambda c: -COMMANDS[c].amount)
+        for code in forwards:
+            if COMMANDS[code].amount <= dist + 0.03:
+                return code
+        return forwards[-1] if forwards else "E"
+
+    # -- the policy -------------------------------------------------------------------------------------
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        if self._gt is None:
+            raise VLNPilotError("the oracle needs ground truth: call attach(ground_truth) first")
+        if self._task is None or self._task.query != pilot_input.query:
+            self._task = parse_query(pilot_input.query, self._gt.scene)
+        pose = self._gt.pose()
+        self._room = self._gt.room() or self._room
+        state = pilot_input.state
+        allowed = state_spec(state, pilot_input.profile).moves
+        move, nxt, note = self._policy(state, pose, allowed)
+        assert move in allowed, (state, move)
+        return Decision(room=self._room or "unknown", movement=move, state=nxt.value, description=note,
+                        door_position=self._door_position(pose), model=self.model)
+
+    def _policy(self, state: State, pose: Pose, allowed: tuple[str, ...]) -> tuple[str, State, str]:
+        task, room = self._task, self._room
+        nd = self._next_door(room, task.goal_room) if room else None
+        S = State
+        if state is S.RECOGNIZE_ROOM:
+            if nd is None:
+                if task.goal_target is None:
+                    return (_rotation(15.0, allowed) or allowed[0]), S.STAY_ON_ROOM, f"I am in the {room}, the goal."
+                x, y = self._viewing_point()
+                return self._goto(pose, x, y, allowed), S.SEARCH_OBJECT, f"In the {room}; searching the object."
+            px, py = self._approach_point(*nd)
+            return self._goto(pose, px, py, allowed), S.SEARCH_OPEN_DOOR, f"In the {room}; looking for {nd[0].id}."
+        if state is S.SEARCH_OPEN_DOOR:
+            px, py = self._approach_point(*nd)
+            err = _bearing(pose, px, py)
+            if math.hypot(px - pose.x, py - pose.y) < 0.08:  # at the approach point: face along the door normal
+                err = wrap_deg(math.degrees(math.atan2(nd[1][1], nd[1][0])) - pose.yaw_deg)
+            rot = _rotation(err, allowed) if abs(err) > ALIGN_DEG else None
+            if rot and abs(err - _signed(rot)) > ALIGN_DEG:
+                return rot, S.SEARCH_OPEN_DOOR, "Turning to look for the open door."
+            return (rot or self._goto(pose, px, py, allowed)), S.ORIENTED_TOWARDS_DOOR, "Open door found ahead."
+        if state is S.ORIENTED_TOWARDS_DOOR:
+            return self._orient(pose, *nd, allowed)
+        if state is S.GO_THROUGH_DOOR:
+            depth = self._door_depth(pose)
+            nxt = S.POSITION_IN_CENTER if depth + 0.1 >= self.cross_m else S.GO_THROUGH_DOOR
+            return "A1", nxt, "Crossing the doorway."
+        if state is S.POSITION_IN_CENTER:
+            if nd is None:
+                return self._goto(pose, *self._room_entry_point(pose), allowed), S.RECOGNIZE_ROOM, "Entering the room."
+            px, py = self._approach_point(*nd)
+            far = math.hypot(px - pose.x, py - pose.y) > 1.0
+            return self._goto(pose, px, py, allowed), (S.POSITION_IN_CENTER if far else S.RECOGNIZE_ROOM), \
+                "Moving into the room."
+        if state is S.SEARCH_OBJECT:
+            vx, vy = self._viewing_point()
+            if math.hypot(vx - pose.x, vy - pose.y) > 0.12:
+                return self._goto(pose, vx, vy, allowed), S.SEARCH_OBJECT, "Searching the object."
+            t = self._gt.scene.target(task.goal_target)
+            err = _bearing(pose, t.position[0], t.position[1])
+            rot = _rotation(err, allowed) if abs(err) > ALIGN_DEG else None
+            if rot is None:
+                return "A1", S.REACH_OBJECT, f"The {t.name} is centred ahead."
+            done = abs(err - _signed(rot)) <= ALIGN_DEG
+            return rot, (S.REACH_OBJECT if done else S.SEARCH_OBJECT), f"Turning towards the {t.name}."
+        if state is S.REACH_OBJECT:
+            dist, err = self._gt.target_distance_bearing(task.goal_target)
+            if abs(err) > ALIGN_DEG and (rot := _rotation(err, allowed)):
+                return rot, S.REACH_OBJECT, "Centring the object."
+            if dist > self.success.object_distance_m - 0.1:
+                return "A1", S.REACH_OBJECT, "Approaching the object."
+            return "E", S.DESCRIBE_OBJECT, f"The {task.goal_target} is right in front of me, about {dist:.1f} m away."
+        if state in (S.STAY_ON_ROOM, S.DESCRIBE_OBJECT):
+            return "E", S.FINAL, "Done."
+        raise VLNPilotError(f"the oracle has no policy for state {state.value}")
+
+    def _approach_point(self, door: Door, normal: tuple[float, float]) -> tuple[float, float]:
+        return door.center[0] - self.approach_m * normal[0], door.center[1] - self.approach_m * normal[1]
+
+    def _door_depth(self, pose: Pose) -> float:
+        """Signed distance past the plane of the door being crossed (the nearest open door)."""
+        door = min(self._gt.scene.open_doors(), key=lambda d: math.dist(d.center, (pose.x, pose.y)))
+        depth, _ = door.frame_of(pose.x, pose.y)
+        heading_along = math.cos(math.radians(pose.yaw_deg - door.normal_deg))
+        return depth if heading_along >= 0 else -depth
+
+    def _room_entry_point(self, pose: Pose) -> tuple[float, float]:
+        """A point 0.5 m further into the room along the current heading."""
+        c, s = pose.heading()
+        return pose.x + 0.5 * c, pose.y + 0.5 * s
+
+    def _orient(self, pose: Pose, door: Door, normal: tuple[float, float], allowed: tuple[str, ...]):
+        S = State
+        nx, ny = normal
+        dx, dy = pose.x - door.center[0], pose.y - door.center[1]
+        depth, lateral = dx * nx + dy * ny, -dx * ny + dy * nx  # lateral > 0: left of the centre line
+        heading_err = wrap_deg(math.degrees(math.atan2(ny, nx)) - pose.yaw_deg)
+        aligned = abs(heading_err) <= ALIGN_DEG
+        if aligned and abs(lateral) <= self.lateral_tol_m:
+            return "A1", S.GO_THROUGH_DOOR, "Centred on the doorway; going through."
+        if aligned and abs(lateral) <= 0.25 and depth < -0.15:
+            return ("D2" if lateral > 0 else "D1"), S.ORIENTED_TOWARDS_DOOR, "Centring on the doorway."
+        px, py = self._approach_point(door, normal)
+        if math.hypot(px - pose.x, py - pose.y) > 0.08:
+            return self._goto(pose, px, py, allowed), S.ORIENTED_TOWARDS_DOOR, "Approaching the doorway."
+        rot = _rotation(heading_err, allowed) or "A1"
+        if abs(heading_err) > 22.5:  # a long turn: Search Open Door allows the larger rotations
+            return rot, S.SEARCH_OPEN_DOOR, "The doorway is to my side; turning to face it."
+        return rot, S.ORIENTED_TOWARDS_DOOR, "Facing the doorway."
+
+    def _door_position(self, pose: Pose) -> str:
+        room, task = self._room, self._task
+        nd = self._next_door(room, task.goal_room) if room else None
+        if nd is None:
+            return "not_visible"
+        err = _bearing(pose, *nd[0].center)
+        if abs(err) > HALF_HFOV:
+            return "not_visible"
+        return "center" if abs(err) <= 10 else ("left" if err > 0 else "right")

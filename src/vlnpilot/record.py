@@ -1,0 +1,155 @@
+"""Recordings: every run writes a directory that can be replayed and reported.
+
+    RUN_DIR/summary.json    task, pilot, outcome, metrics, provenance (rewritten at the end; 'running' before)
+    RUN_DIR/episode.jsonl   one JSON line per step, appended and flushed as the step ends
+    RUN_DIR/frames/         front_NNN.jpg and rear_NNN.jpg (NNN = step; 000 is the start)
+
+A run that is interrupted keeps every step written so far. Nothing here ever sees an API key: only
+decisions, poses and images are written.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import os
+import platform
+import subprocess
+import tempfile
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from PIL import Image
+
+from vlnpilot.errors import ConfigError
+
+SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
+
+
+def check_writable(out: str | Path) -> Path:
+    """Create `out` if needed and prove it is writable, or raise ConfigError naming the problem."""
+    path = Path(out)
+    if path.exists() and not path.is_dir():
+        raise ConfigError(f"--out {path} exists and is not a directory")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".write-test-"):
+            pass
+    except OSError as exc:
+        raise ConfigError(f"cannot write to --out {path}: {exc.strerror or exc}") from None
+    return path
+
+
+def default_run_dir(root: str | Path = "runs", label: str = "run") -> Path:
+    stamp = datetime.now(UTC).strftime("%Y%m%d-%H%M%S-%f")[:-3]
+    safe = "".join(ch if ch.isalnum() or ch in "-_" else "-" for ch in label.lower()).strip("-")[:40] or "run"
+    return Path(root) / f"{stamp}-{safe}"
+
+
+@functools.cache
+def git_sha() -> str:
+    """The git commit of the installed source tree, with '+dirty' when it has local changes."""
+    here = Path(__file__).resolve().parent
+    try:
+        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5,
+                             check=True).stdout.strip()
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
+                               capture_output=True, text=True, timeout=5).stdout.strip()
+        return sha + ("+dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+@functools.cache
+def package_versions() -> dict[str, str]:
+    out = {"python": platform.python_version()}
+    for pkg in ("vln-pilot", "mujoco", "numpy", "openai", "google-genai", "anthropic"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            pass
+    return out
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if hasattr(value, "model_dump"):
+        return value.model_dump(mode="json")
+    if hasattr(value, "value") and hasattr(value, "name"):  # enums
+        return value.value
+    return value
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """Write JSON through a temporary file and rename, so a reader never sees half a file."""
+    tmp = path.with_suffix(path.suffix + ".tmp")
+    tmp.write_text(json.dumps(_jsonable(data), indent=2, sort_keys=False) + "\n")
+    os.replace(tmp, path)
+
+
+class Recorder:
+    """Writes one run directory. Used by the controller as a collaborator, never from inside `env.step()`."""
+
+    def __init__(self, run_dir: str | Path, *, jpeg_quality: int = 85, save_frames: bool = True):
+        self.run_dir = check_writable(run_dir)
+        self.frames_dir = self.run_dir / FRAMES
+        self.jpeg_quality = jpeg_quality
+        self.save_frames = save_frames
+        if save_frames:
+            self.frames_dir.mkdir(exist_ok=True)
+        self._episode = open(self.run_dir / EPISODE, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
+        self._summary: dict[str, Any] = {}
+
+    def frame_paths(self, step: int) -> dict[str, str]:
+        return {"front": f"{FRAMES}/front_{step:03d}.jpg", "rear": f"{FRAMES}/rear_{step:03d}.jpg"}
+
+    def save_observation(self, step: int, front: np.ndarray, rear: np.ndarray) -> dict[str, str]:
+        """Save both frames of a step as JPEG; returns their paths relative to the run directory."""
+        if not self.save_frames:
+            return {}
+        paths = self.frame_paths(step)
+        for key, img in (("front", front), ("rear", rear)):
+            if img.size > 3:  # observations of a render-less simulator carry 1x1 placeholders
+                Image.fromarray(img).save(self.run_dir / paths[key], quality=self.jpeg_quality)
+        return paths
+
+    def start(self, summary: dict[str, Any]) -> None:
+        self._summary = {"status": "running", **summary}
+        write_json_atomic(self.run_dir / SUMMARY, self._summary)
+
+    def step(self, record: dict[str, Any]) -> None:
+        self._episode.write(json.dumps(_jsonable(record)) + "\n")
+        self._episode.flush()
+
+    def finish(self, summary: dict[str, Any]) -> None:
+        self._summary = {**self._summary, **summary, "status": "finished"}
+        write_json_atomic(self.run_dir / SUMMARY, self._summary)
+        self.close()
+
+    def close(self) -> None:
+        if not self._episode.closed:
+            self._episode.close()
+
+
+def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Read a run directory back: (summary, steps). A truncated last line (killed mid-write) is skipped."""
+    run_dir = Path(run_dir)
+    if not (run_dir / SUMMARY).is_file():
+        raise ConfigError(f"{run_dir} is not a run directory: {SUMMARY} is missing")
+    summary = json.loads((run_dir / SUMMARY).read_text())
+    steps = []
+    if (run_dir / EPISODE).is_file():
+        for line in (run_dir / EPISODE).read_text().splitlines():
+            try:
+                steps.append(json.loads(line))
+            except json.JSONDecodeError:
+                break
+    return summary, steps
