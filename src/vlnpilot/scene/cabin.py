@@ -111,18 +111,31 @@ Opening = tuple[float, float, float, float]  # centre along the wall, width, bot
 
 
 def wall(name: str, axis: str, a0: float, a1: float, c0: float, c1: float, mat: str,
-         openings: tuple[Opening, ...] = ()) -> list[Solid]:
-    """A wall running along `axis` ('x' or 'y') from a0 to a1, spanning c0..c1 across, with openings cut out."""
+         openings: tuple[Opening, ...] = (), face: int = 1) -> list[Solid]:
+    """A wall running along `axis` ('x' or 'y') from a0 to a1, spanning c0..c1 across, with openings cut out.
+
+    `face` says which side faces the room (+1: the c1 side, -1: the c0 side). That side gets a visual
+    plane 'skin' carrying the finish: MuJoCo maps 2-D textures correctly on planes but smears them on the
+    vertical faces of boxes (tiles would lose their grout lines).
+    """
     solids: list[Solid] = []
+    c_face = (c1 if face > 0 else c0) + 0.001 * face
+    normal = (0.0, float(face), 0.0) if axis == "x" else (float(face), 0.0, 0.0)
+    x_axis = (-normal[1], normal[0], 0.0)  # up x normal, so that x cross up = normal
 
     def part(i: int, b0: float, b1: float, z0: float, z1: float) -> None:
         if b1 - b0 < 1e-6 or z1 - z0 < 1e-6:
             return
         n = f"{name}_{i}"
+        mid, half = (b0 + b1) / 2, (b1 - b0) / 2
         if axis == "x":
             solids.append(box(n, b0, b1, c0, c1, z0, z1, mat))
+            centre = (mid, c_face, (z0 + z1) / 2)
         else:
             solids.append(box(n, c0, c1, b0, b1, z0, z1, mat))
+            centre = (c_face, mid, (z0 + z1) / 2)
+        solids.append(Solid(f"{n}_skin", "plane", centre, (half, (z1 - z0) / 2, 0.0), mat, collide=False,
+                            xyaxes=(*x_axis, 0.0, 0.0, 1.0)))
 
     cursor, i = a0, 0
     for centre, width, zb, zt in sorted(openings):
@@ -235,12 +248,12 @@ def _structure() -> list[Solid]:
          (win["bathroom_window_east"],)),
     ]
     for name, axis, a0, a1, c0, c1, mat, openings in ext:
-        s += wall(name, axis, a0, a1, c0, c1, mat, openings)
+        s += wall(name, axis, a0, a1, c0, c1, mat, openings, face=1 if c1 <= 0.0 else -1)
     # interior walls: two halves, each with the finish of its room
-    s += wall("wall_living_bedroom_w", "y", 0, Y_MAX, X_LIVING - T_IN / 2, X_LIVING, "wall_living", (door1,))
-    s += wall("wall_living_bedroom_e", "y", 0, Y_MAX, X_LIVING, X_LIVING + T_IN / 2, "wall_bedroom", (door1,))
-    s += wall("wall_bedroom_bathroom_w", "y", 0, Y_MAX, X_BED - T_IN / 2, X_BED, "wall_bedroom", (door2,))
-    s += wall("wall_bedroom_bathroom_e", "y", 0, Y_MAX, X_BED, X_BED + T_IN / 2, "wall_bathroom", (door2,))
+    s += wall("wall_living_bedroom_w", "y", 0, Y_MAX, X_LIVING - T_IN / 2, X_LIVING, "wall_living", (door1,), -1)
+    s += wall("wall_living_bedroom_e", "y", 0, Y_MAX, X_LIVING, X_LIVING + T_IN / 2, "wall_bedroom", (door1,), 1)
+    s += wall("wall_bedroom_bathroom_w", "y", 0, Y_MAX, X_BED - T_IN / 2, X_BED, "wall_bedroom", (door2,), -1)
+    s += wall("wall_bedroom_bathroom_e", "y", 0, Y_MAX, X_BED, X_BED + T_IN / 2, "wall_bathroom", (door2,), 1)
     # doorways: door 1 opens into the living room (hinge on its north jamb), door 2 into the bedroom
     s += doorway(d1, T_IN, leaf_into=0, hinge="left")
     s += doorway(d2, T_IN, leaf_into=0, hinge="right")
@@ -275,6 +288,12 @@ def _living_room() -> list[Solid]:
     for i, (z0, z1) in enumerate(((0.75, 1.18), (1.32, 1.62))):
         s.append(box(f"refrigerator_handle_{i}", fx1 - 0.09, fx1 - 0.06, fy0 - 0.05, fy0, z0, z1, "chrome",
                      target=REFRIGERATOR))
+    for i, (mx, mz, mat) in enumerate(((2.25, 1.45, "cushion_red"), (2.40, 1.50, "cushion_yellow"),
+                                       (2.30, 1.05, "painting"), (2.55, 1.10, "tv_screen"))):
+        s.append(box(f"refrigerator_note_{i}", mx - 0.05, mx + 0.05, fy0 - 0.004, fy0, mz - 0.06, mz + 0.06, mat,
+                     collide=False, target=REFRIGERATOR))
+    s.append(box("refrigerator_dispenser", 2.20, 2.42, fy0 - 0.006, fy0, 1.62, 1.78, "dark_grey", collide=False,
+                 target=REFRIGERATOR))
     # TV on a low stand against the west wall, sofa facing it, coffee table and rug between
     s.append(box("tv_stand", 0.0, 0.45, 1.0, 2.2, 0.0, 0.48, "wood"))
     s.append(box("tv_body", 0.10, 0.16, 1.02, 2.18, 0.70, 1.38, "black"))
@@ -320,18 +339,17 @@ def _bedroom() -> list[Solid]:
         cx = (x0 + x1) / 2
         s.append(cyl(f"bedside_lamp_{side}_base", cx, 3.38, 0.55, 0.78, 0.04, "metal"))
         s.append(cyl(f"bedside_lamp_{side}_shade", cx, 3.38, 0.78, 0.96, 0.11, "lampshade"))
-    # wardrobe against the south wall
-    s.append(box("wardrobe", 4.40, 5.62, 0.0, 0.60, 0.0, 2.05, "wood"))
-    s.append(box("wardrobe_door_gap", 5.005, 5.015, 0.60, 0.606, 0.05, 2.0, "dark_wood", collide=False))
-    for i, x in enumerate((4.95, 5.07)):
-        s.append(box(f"wardrobe_handle_{i}", x - 0.01, x + 0.01, 0.60, 0.63, 0.9, 1.2, "chrome"))
+    # wardrobe against the west wall, north of the doorway (clear of the view through the door)
+    s.append(box("wardrobe", X_LIVING + T_IN / 2, 4.65, 1.95, 3.10, 0.0, 2.05, "wood"))
+    s.append(box("wardrobe_door_gap", 4.65, 4.656, 2.52, 2.53, 0.05, 2.0, "dark_wood", collide=False))
+    for i, y in enumerate((2.45, 2.60)):
+        s.append(box(f"wardrobe_handle_{i}", 4.65, 4.68, y - 0.01, y + 0.01, 0.9, 1.2, "chrome"))
     # full-length mirror (target) on the east wall, facing west
     mx = X_BED - T_IN / 2
     s.append(box("mirror_frame", mx - 0.05, mx, 2.20, 3.00, 0.40, 2.00, "mirror_frame", target=MIRROR))
     s.append(box("mirror_glass", mx - 0.06, mx - 0.05, 2.25, 2.95, 0.45, 1.95, "mirror_glass", target=MIRROR))
-    # a painting on the west wall and a rug beside the bed
-    s.append(box("bedroom_painting", X_LIVING + T_IN / 2, X_LIVING + T_IN / 2 + 0.02, 2.1, 3.0, 1.25, 1.85,
-                 "painting", collide=False))
+    # a painting on the south wall and a rug beside the bed
+    s.append(box("bedroom_painting", 4.55, 5.45, 0.0, 0.02, 1.25, 1.85, "painting", collide=False))
     s.append(box("rug_bedroom", 4.45, 4.72, 1.8, 3.0, 0.0, 0.006, "rug", collide=False))
     return s
 

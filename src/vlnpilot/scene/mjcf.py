@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from xml.sax.saxutils import quoteattr
 
 from vlnpilot.scene.model import Scene, Solid
@@ -30,10 +31,13 @@ def _geom(solid: Solid) -> str:
     }
     if solid.shape == "cylinder":
         attrs["size"] = _f(solid.size[:2])
-    if solid.euler_deg is not None:
-        attrs["euler"] = _f(solid.euler_deg)
-    elif solid.yaw_deg:
-        attrs["euler"] = _f((0.0, 0.0, solid.yaw_deg))
+    euler = solid.euler_deg or (0.0, 0.0, solid.yaw_deg)
+    if solid.shape == "plane":  # visual skins: oriented by their in-plane axes (normal = x cross y)
+        attrs["size"] = _f((solid.size[0], solid.size[1], 0.5))
+        attrs["xyaxes"] = _f(solid.xyaxes)
+        euler = (0.0, 0.0, 0.0)
+    if euler != (0.0, 0.0, 0.0):
+        attrs["euler"] = _f(math.radians(a) for a in euler)
     return "<geom " + " ".join(f"{k}={quoteattr(v)}" for k, v in attrs.items()) + "/>"
 
 

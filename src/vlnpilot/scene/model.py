@@ -133,7 +133,7 @@ class Solid:
     """
 
     name: str
-    shape: str  # box | cylinder | sphere | ellipsoid | capsule
+    shape: str  # box | cylinder | sphere | ellipsoid | capsule | plane (visual skins only)
     pos: Vec3
     size: Vec3
     material: str
@@ -141,6 +141,7 @@ class Solid:
     euler_deg: Vec3 | None = None  # full orientation, overrides yaw when given
     collide: bool = True
     target: str | None = None  # id of the target this solid belongs to
+    xyaxes: tuple[float, ...] | None = None  # planes: in-plane x and y axes (the normal is x cross y)
 
 
 @dataclass(frozen=True)
