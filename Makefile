@@ -6,16 +6,19 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test sysdeps venv lint bench clean
+.PHONY: demo test sysdeps testdeps venv lint bench clean
 
 demo: sysdeps $(STAMP)
-	$(VENV)/bin/vln-pilot scene render --spawn living_room --out runs/demo-scene
+	$(VENV)/bin/vln-pilot run "Go to the bathroom" --spawn living_room
 
-test: sysdeps $(STAMP)
+test: sysdeps testdeps $(STAMP)
 	$(PY) -m pytest -q
 
 sysdeps:
-	@bash scripts/install-system-deps.sh
+	@bash scripts/install-system-deps.sh gl
+
+testdeps:
+	@bash scripts/install-system-deps.sh browser
 
 venv: $(STAMP)
 

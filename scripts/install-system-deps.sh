@@ -1,33 +1,44 @@
 #!/usr/bin/env bash
-# Installs the headless OpenGL libraries MuJoCo renders with (EGL + Mesa's software rasteriser),
-# from Debian's packages, when they are missing. As root it installs them; otherwise it prints the
-# exact command to run and fails.
+# Installs the system packages VLN-Pilot needs from Debian's packages, only when they are missing:
+#   gl       the headless OpenGL libraries MuJoCo renders with (EGL + Mesa's software rasteriser)
+#   browser  Chromium, for the report tests (driven by Playwright's Python package)
+# As root it installs them; otherwise it prints the exact command to run and fails.
 set -euo pipefail
 
-packages=(libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libglx-mesa0)
-libs=(libEGL.so.1 libEGL_mesa.so.0 libGL.so.1)
+wants=("$@")
+[ ${#wants[@]} -gt 0 ] || wants=(gl)
 
-known=$(ldconfig -p 2>/dev/null || true)
-missing_lib=""
-for lib in "${libs[@]}"; do
-  case "$known" in *"$lib"*) ;; *) missing_lib="$lib"; break ;; esac
+packages=()
+reasons=()
+for want in "${wants[@]}"; do
+  case "$want" in
+    gl)
+      known=$(ldconfig -p 2>/dev/null || true)
+      for lib in libEGL.so.1 libEGL_mesa.so.0 libGL.so.1; do
+        case "$known" in *"$lib"*) ;; *) reasons+=("$lib"); ;; esac
+      done
+      compgen -G "/usr/lib/*/dri/swrast_dri.so" >/dev/null || reasons+=("swrast_dri.so (Mesa software renderer)")
+      [ ${#reasons[@]} -eq 0 ] || packages+=(libegl1 libegl-mesa0 libgl1-mesa-dri libgl1 libglx-mesa0)
+      ;;
+    browser)
+      if [ ! -x /usr/bin/chromium ]; then reasons+=("/usr/bin/chromium"); packages+=(chromium fonts-dejavu-core); fi
+      ;;
+    *) echo "error: unknown dependency group '$want'; valid groups: gl, browser" >&2; exit 2 ;;
+  esac
 done
-if [ -z "$missing_lib" ] && compgen -G "/usr/lib/*/dri/swrast_dri.so" >/dev/null; then
-  exit 0
-fi
-[ -n "$missing_lib" ] || missing_lib="swrast_dri.so (Mesa software renderer)"
+[ ${#packages[@]} -gt 0 ] || exit 0
 
 cmd="apt-get update && apt-get install -y --no-install-recommends ${packages[*]}"
 if ! command -v apt-get >/dev/null 2>&1; then
-  echo "error: $missing_lib is missing and this is not a Debian/Ubuntu machine; install the EGL and Mesa libraries (packages like: ${packages[*]})" >&2
+  echo "error: missing ${reasons[*]} and this is not a Debian/Ubuntu machine; install: ${packages[*]}" >&2
   exit 1
 fi
 if [ "$(id -u)" != "0" ]; then
-  echo "error: $missing_lib is missing. Install the headless OpenGL libraries with:" >&2
+  echo "error: missing ${reasons[*]}. Install the system packages with:" >&2
   echo "  sudo sh -c '$cmd'" >&2
   exit 1
 fi
-echo "installing headless OpenGL libraries: ${packages[*]}"
+echo "installing system packages (missing ${reasons[*]}): ${packages[*]}"
 export DEBIAN_FRONTEND=noninteractive
 apt-get update -qq
 apt-get install -y -qq --no-install-recommends "${packages[@]}" >/dev/null

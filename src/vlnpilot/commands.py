@@ -7,13 +7,13 @@ Prompts, JSON schemas, validation, the simulator and the docs all read this tabl
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 from vlnpilot.errors import UnknownNameError
 from vlnpilot.types import Motion
 
 
-class Kind(str, Enum):
+class Kind(StrEnum):
     FORWARD = "forward"
     ROTATE_RIGHT = "rotate_right"
     ROTATE_LEFT = "rotate_left"

@@ -16,13 +16,13 @@ Where the paper is incomplete we decide, and mark each decision with `added_next
 from __future__ import annotations
 
 from dataclasses import dataclass
-from enum import Enum
+from enum import StrEnum
 
 from vlnpilot.commands import COMMANDS
 from vlnpilot.errors import UnknownNameError
 
 
-class State(str, Enum):
+class State(StrEnum):
     START = "Start"
     RECOGNIZE_ROOM = "Recognize Room"
     SEARCH_OPEN_DOOR = "Search Open Door"
@@ -34,9 +34,6 @@ class State(str, Enum):
     REACH_OBJECT = "Reach Object"
     DESCRIBE_OBJECT = "Describe Object"
     FINAL = "Final"
-
-    def __str__(self) -> str:
-        return self.value
 
 
 def parse_state(name: str) -> State:

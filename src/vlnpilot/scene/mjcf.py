@@ -64,6 +64,7 @@ def scene_to_mjcf(scene: Scene, *, bodies: str = "", assets_xml: str = "", max_r
     (xmin, ymin), (xmax, ymax) = scene.bounds
     geoms = "\n    ".join(_geom(s) for s in scene.solids)
     w, h = max_render
+    ambient = _f((scene.headlight,) * 3)
     xml = f"""<mujoco model="{scene.name}">
   <compiler angle="radian"/>
   <option gravity="0 0 0" timestep="0.01"/>
@@ -72,7 +73,7 @@ def scene_to_mjcf(scene: Scene, *, bodies: str = "", assets_xml: str = "", max_r
     <global offwidth="{w}" offheight="{h}"/>
     <quality shadowsize="{4096 if shadows else 0}" offsamples="0" numslices="16" numstacks="8" numquads="2"/>
     <map znear="0.002" zfar="3"/>
-    <headlight ambient="{scene.headlight:g} {scene.headlight:g} {scene.headlight:g}" diffuse="0.35 0.35 0.35" specular="0.05 0.05 0.05"/>
+    <headlight ambient="{ambient}" diffuse="0.35 0.35 0.35" specular="0.05 0.05 0.05"/>
     <rgba haze="0.15 0.25 0.35 1"/>
   </visual>
   <asset>

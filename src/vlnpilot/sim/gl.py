@@ -6,7 +6,6 @@ import ctypes.util
 import os
 
 import vlnpilot
-
 from vlnpilot.errors import RenderBackendError
 
 INSTALL_HINT = "sudo apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 (or run `make sysdeps`)"

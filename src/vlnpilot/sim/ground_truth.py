@@ -6,7 +6,7 @@ import math
 from typing import TYPE_CHECKING
 
 from vlnpilot.scene import Scene
-from vlnpilot.types import Pose, wrap_deg
+from vlnpilot.types import Motion, Pose, wrap_deg
 
 if TYPE_CHECKING:
     from vlnpilot.sim.simulator import Simulator
@@ -53,3 +53,14 @@ class SimGroundTruth:
         hit = self._sim.contact_at(pose)
         self._sim.contact_at(self._sim.pose)  # restore the model's kinematic state
         return hit[0] if hit else None
+
+    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
+        """(distance, scene geom, drone part) of the nearest geom within `max_distance` of the drone at `pose`
+        (negative when penetrating), else None: the geometry shield's margin query."""
+        hit = self._sim.clearance_at(pose, max_distance)
+        self._sim.contact_at(self._sim.pose)  # restore the model's kinematic state
+        return hit
+
+    def substeps(self, motion: Motion) -> int:
+        """How many collision-checked sub-steps the simulator splits `motion` into (the shield samples a superset)."""
+        return self._sim.substeps(motion)

@@ -10,8 +10,6 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
-from vlnpilot.sim import gl  # noqa: F401  (selects the headless GL backend before mujoco is imported)
-
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -19,7 +17,10 @@ from vlnpilot.commands import Command, get_command  # noqa: E402
 from vlnpilot.errors import ConfigError, UnknownNameError  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
-from vlnpilot.sim import drone  # noqa: E402
+from vlnpilot.sim import (
+    drone,  # noqa: E402
+    gl,  # noqa: F401  (selects the headless GL backend before mujoco is imported)
+)
 from vlnpilot.types import Motion, Observation, Pose  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
@@ -44,9 +45,10 @@ class SimConfig:
     visibility_height: int = 120
 
     def __post_init__(self) -> None:
-        for w, h, what in ((self.width, self.height, "front camera"), (self.rear_width, self.rear_height, "rear camera")):
-            if not (16 <= w <= MAX_RESOLUTION[0] and 16 <= h <= MAX_RESOLUTION[1]):
-                raise ConfigError(f"{what} resolution {w}x{h} is outside 16x16..{MAX_RESOLUTION[0]}x{MAX_RESOLUTION[1]}")
+        max_w, max_h = MAX_RESOLUTION
+        for w, h, what in ((self.width, self.height, "front"), (self.rear_width, self.rear_height, "rear")):
+            if not (16 <= w <= max_w and 16 <= h <= max_h):
+                raise ConfigError(f"{what} camera resolution {w}x{h} is outside 16x16..{max_w}x{max_h}")
         if self.substep_m <= 0 or self.substep_deg <= 0:
             raise ConfigError("substep sizes must be positive")
 
@@ -68,13 +70,18 @@ class Simulator:
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._qpos_adr = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, drone.JOINT)]
-        body_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, drone.BODY)
+        body_id = self._body_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, drone.BODY)
+        self._rear_cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, drone.REAR_CAMERA)
+        self._rear_cam_pos = m.cam_pos[self._rear_cam].copy()
+        self._ray_geom = np.zeros(1, np.int32)
         self.drone_geoms = frozenset(int(g) for g in np.flatnonzero(m.geom_bodyid == body_id))
         self._geom_names = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_GEOM, g) or f"geom{g}" for g in range(m.ngeom)]
         self.target_geoms = {
             t.id: frozenset(g for g, n in enumerate(self._geom_names) if n in self._target_solid_names(t.id))
             for t in self.scene.targets
         }
+        self._world_aabb: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # for clearance_at
+        self._drone_colliders: list[int] = []
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._seg_renderer: mujoco.Renderer | None = None
         self._pose = Pose(0.0, 0.0, self.scene.flight_altitude, 0.0)
@@ -120,11 +127,54 @@ class Simulator:
             return None
         return self._geom_names[best[1]], self._geom_names[best[2]]
 
+    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
+        """(signed distance, world geom, drone part) of the nearest scene geom closer than `max_distance` to the
+        drone at `pose` (negative: penetrating), else None. Exact per geom pair (`mj_geomDistance`), for the
+        safety shield's margin; leaves the model's kinematic state at `pose`."""
+        if self._world_aabb is None:
+            self._world_aabb = self._static_world_aabbs()
+        ids, lo, hi = self._world_aabb
+        p = np.array([pose.x, pose.y, pose.z])
+        r = math.hypot(drone.LENGTH / 2, drone.WIDTH / 2) + max_distance
+        ext = np.array([r, r, drone.HEIGHT / 2 + max_distance])
+        cand = ids[np.all((lo <= p + ext) & (hi >= p - ext), axis=1)]
+        if cand.size == 0:
+            return None
+        self._set_qpos(pose)
+        mujoco.mj_kinematics(self.model, self.data)
+        best: tuple[float, int, int] | None = None
+        for g in cand.tolist():
+            for part in self._drone_colliders:
+                d = mujoco.mj_geomDistance(self.model, self.data, part, g, max_distance, None)
+                if d < max_distance and (best is None or d < best[0]):
+                    best = (float(d), g, part)
+        if best is None:
+            return None
+        return best[0], self._geom_names[best[1]], self._geom_names[best[2]]
+
+    def _static_world_aabbs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """World-frame boxes around every scene geom the drone can collide with (the scene is static)."""
+        m = self.model
+        mujoco.mj_kinematics(m, self.data)
+        self._drone_colliders = [g for g in sorted(self.drone_geoms) if m.geom_contype[g] or m.geom_conaffinity[g]]
+        dt, da = drone.DRONE_CONTYPE, drone.DRONE_CONAFFINITY
+        ids = np.array([g for g in range(m.ngeom) if g not in self.drone_geoms
+                        and ((m.geom_contype[g] & da) or (m.geom_conaffinity[g] & dt))], dtype=int)
+        xmat = self.data.geom_xmat[ids].reshape(-1, 3, 3)
+        centre = self.data.geom_xpos[ids] + np.einsum("nij,nj->ni", xmat, m.geom_aabb[ids, :3])
+        half = np.einsum("nij,nj->ni", np.abs(xmat), m.geom_aabb[ids, 3:])
+        return ids, centre - half, centre + half
+
+    def substeps(self, motion: Motion) -> int:
+        """How many collision-checked sub-steps `sweep` splits `motion` into (the poses at i/n, i = 1..n)."""
+        cfg = self.config
+        trans = math.hypot(motion.forward_m, motion.lateral_m) + abs(motion.vertical_m)
+        return max(1, math.ceil(trans / cfg.substep_m), math.ceil(abs(motion.yaw_deg) / cfg.substep_deg))
+
     def sweep(self, start: Pose, motion: Motion) -> tuple[Pose, tuple[str, str] | None]:
         """Execute `motion` from `start` in sub-steps; stop at the last free pose before the first contact."""
         cfg = self.config
-        trans = math.hypot(motion.forward_m, motion.lateral_m) + abs(motion.vertical_m)
-        n = max(1, math.ceil(trans / cfg.substep_m), math.ceil(abs(motion.yaw_deg) / cfg.substep_deg))
+        n = self.substeps(motion)
         free = 0.0
         for i in range(1, n + 1):
             frac = i / n
@@ -182,9 +232,26 @@ class Simulator:
         self._step += 1
         return self._observe(collided=hit is not None, contact=hit)
 
-    def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
+    def _sync(self) -> None:
+        """Put the model at the drone's pose (collision queries may have moved it) and place the chase camera."""
         self._set_qpos(self._pose)
         mujoco.mj_forward(self.model, self.data)
+        self._place_chase_camera()
+
+    def _place_chase_camera(self) -> None:
+        """Pull the rear camera in front of any wall behind the drone, so the chase view never shows a wall's inside."""
+        m, d = self.model, self.data
+        m.cam_pos[self._rear_cam] = self._rear_cam_pos
+        start = d.xpos[self._body_id]
+        offset = d.xmat[self._body_id].reshape(3, 3) @ self._rear_cam_pos
+        length = float(np.linalg.norm(offset))
+        hit = mujoco.mj_ray(m, d, start, offset / length, None, 1, self._body_id, self._ray_geom)
+        if 0 <= hit < length + 0.05:
+            m.cam_pos[self._rear_cam] = self._rear_cam_pos * max(hit - 0.08, 0.05) / length
+        mujoco.mj_camlight(m, d)
+
+    def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
+        self._sync()
         front = self.render(drone.FRONT_CAMERA)
         rear = self.render(drone.REAR_CAMERA)
         return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
@@ -211,6 +278,7 @@ class Simulator:
         w = width or (cfg.width if front else cfg.rear_width)
         h = height or (cfg.height if front else cfg.rear_height)
         r = self._renderer(w, h)
+        self._sync()
         if depth:
             r.enable_depth_rendering()
         try:
@@ -229,8 +297,7 @@ class Simulator:
             except Exception as exc:
                 raise gl.backend_error(exc) from exc
             self._seg_renderer.enable_segmentation_rendering()
-        self._set_qpos(self._pose)
-        mujoco.mj_forward(self.model, self.data)
+        self._sync()
         self._seg_renderer.update_scene(self.data, camera=camera)
         seg = self._seg_renderer.render()
         ids = seg[..., 0].astype(np.int32)

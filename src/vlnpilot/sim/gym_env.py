@@ -1,0 +1,161 @@
+"""Gymnasium environment `VLNPilot/Cabin-v0`: the embedded simulator for reinforcement-learning users.
+
+Importing this module registers the id, so `gymnasium.make("VLNPilot/Cabin-v0")` works afterwards.
+Actions index the command table (`commands.COMMANDS`, in its order); observations are a dict of the front
+image, the pose and the collision flag. Episodes end with `terminated` on reaching the goal room (+1) or on a
+collision (-1), and with `truncated` (never both) when `max_steps` steps have been taken.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from vlnpilot.commands import COMMANDS, Command
+from vlnpilot.errors import ConfigError
+from vlnpilot.scene import Scene, Spawn, load_scene
+from vlnpilot.sim.simulator import SimConfig, Simulator
+from vlnpilot.types import Observation, Pose
+
+ENV_ID = "VLNPilot/Cabin-v0"
+GOAL_REWARD, COLLISION_REWARD, STEP_REWARD = 1.0, -1.0, -0.01
+
+
+class CabinEnv(gym.Env):
+    """The simulated Tello in a scene, one table command per step.
+
+    Options: `spawn` (name, Spawn or Pose; default the scene's first spawn; `reset(options={"spawn": ...})`
+    overrides it for one episode), `goal_room` (room id or alias; optional, also a reset option), `max_steps`,
+    `width`/`height` of the front image, `render_mode="rgb_array"` (`render()` returns the rear chase view),
+    `spawn_jitter_m`/`spawn_jitter_deg` (seeded spawn variety).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, scene: str | Scene = "cabin", *, spawn: str | Spawn | Pose | None = None,
+                 goal_room: str | None = None, max_steps: int = 50, width: int = 640, height: int = 480,
+                 render_mode: str | None = None, spawn_jitter_m: float = 0.0, spawn_jitter_deg: float = 0.0):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ConfigError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
+        if max_steps < 1:
+            raise ConfigError(f"max_steps must be at least 1, got {max_steps}")
+        self.render_mode = render_mode
+        self.max_steps = int(max_steps)
+        self.scene = load_scene(scene)
+        self.spawn = self._resolve_spawn(spawn)
+        self.goal_room = self._resolve_room(goal_room)
+        # the rear view is only wanted for render(); without a render mode keep its render as cheap as possible
+        rear = (width, height) if render_mode == "rgb_array" else (16, 16)
+        self.sim = Simulator(self.scene, SimConfig(width=width, height=height, rear_width=rear[0],
+                                                   rear_height=rear[1], spawn_jitter_m=spawn_jitter_m,
+                                                   spawn_jitter_deg=spawn_jitter_deg))
+        self.commands: tuple[Command, ...] = tuple(COMMANDS.values())
+
+        (xmin, ymin), (xmax, ymax) = self.scene.bounds
+        low = np.array([xmin, ymin, 0.0, -180.0], np.float32)
+        high = np.array([xmax, ymax, self.scene.ceiling_height, 180.0], np.float32)
+        self.action_space = spaces.Discrete(len(self.commands))
+        self.observation_space = spaces.Dict({
+            "front": spaces.Box(0, 255, (height, width, 3), np.uint8),
+            "pose": spaces.Box(low, high, (4,), np.float32),
+            "collided": spaces.Discrete(2),
+        })
+        self._last: Observation | None = None
+        self._steps = 0
+        self._episode_goal: str | None = self.goal_room
+
+    # -- options --------------------------------------------------------------------------------------
+    def _resolve_spawn(self, spawn: str | Spawn | Pose | None) -> Spawn | Pose:
+        if spawn is None:
+            return self.scene.spawns[0]
+        if isinstance(spawn, str):
+            return self.scene.spawn(spawn)
+        if isinstance(spawn, Spawn | Pose):
+            return spawn
+        raise ConfigError(f"spawn must be a spawn name, a Spawn or a Pose, got {type(spawn).__name__}")
+
+    def _resolve_room(self, room: str | None) -> str | None:
+        if room is None:
+            return None
+        found = self.scene.find_room(room)
+        return found.id if found is not None else self.scene.room(room).id  # .room() raises, listing the ids
+
+    def action_meaning(self, action: int) -> str:
+        """'A1: move forward 10 cm', ... for an action index."""
+        cmd = self.commands[int(action)]
+        return f"{cmd.code}: {cmd.description}"
+
+    # -- Gymnasium API ---------------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        super().reset(seed=seed)
+        options = dict(options or {})
+        unknown = set(options) - {"spawn", "goal_room"}
+        if unknown:
+            raise ConfigError(f"unknown reset options {sorted(unknown)}; valid: goal_room, spawn")
+        spawn = self._resolve_spawn(options["spawn"]) if options.get("spawn") is not None else self.spawn
+        self._episode_goal = self._resolve_room(options["goal_room"]) if "goal_room" in options else self.goal_room
+        sim_seed = int(self.np_random.integers(2**31 - 1))  # reproducible from the reset seed
+        self._last = self.sim.reset(spawn, seed=sim_seed)
+        self._steps = 0
+        return self._obs(self._last), self._info(self._last)
+
+    def step(self, action):
+        if self._last is None:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        if not self.action_space.contains(action):
+            raise ConfigError(f"action {action!r} is not in {self.action_space}")
+        obs = self.sim.step(self.commands[int(action)])
+        self._last, self._steps = obs, self._steps + 1
+        room = self.scene.room_at(obs.pose.x, obs.pose.y)
+        reached = self._episode_goal is not None and room == self._episode_goal
+        if obs.collided:
+            reward, terminated = COLLISION_REWARD, True
+        elif reached:
+            reward, terminated = GOAL_REWARD, True
+        else:
+            reward, terminated = STEP_REWARD, False
+        truncated = not terminated and self._steps >= self.max_steps
+        return self._obs(obs), reward, terminated, truncated, self._info(obs, room)
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        if self._last is None:
+            raise gym.error.ResetNeeded("call reset() before render()")
+        return self._last.rear_rgb
+
+    def close(self) -> None:
+        self.sim.close()
+
+    # -- helpers ------------------------------------------------------------------------------------------
+    @staticmethod
+    def _obs(obs: Observation) -> dict[str, Any]:
+        p = obs.pose
+        return {
+            "front": obs.front_rgb,
+            "pose": np.array([p.x, p.y, p.z, p.yaw_deg], np.float32),
+            "collided": int(obs.collided),
+        }
+
+    def _info(self, obs: Observation, room: str | None = None) -> dict[str, Any]:
+        room = room if room is not None else self.scene.room_at(obs.pose.x, obs.pose.y)
+        return {
+            "step": obs.step,
+            "room": room,
+            "goal_room": self._episode_goal,
+            "is_success": self._episode_goal is not None and room == self._episode_goal and not obs.collided,
+            "contact": obs.contact,
+            "contact_part": obs.contact_part,
+        }
+
+
+def register() -> None:
+    """Register `VLNPilot/Cabin-v0` with Gymnasium (idempotent)."""
+    if ENV_ID not in gym.registry:
+        gym.register(id=ENV_ID, entry_point="vlnpilot.sim.gym_env:CabinEnv", kwargs={"scene": "cabin"})
+
+
+register()

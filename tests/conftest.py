@@ -1,0 +1,37 @@
+"""Shared fixtures: the built-in scene and one simulator per test session (building one takes ~0.5 s).
+
+The `sim` fixture is shared by every test that asks for it: call `sim.reset(...)` before using it and do not
+rely on the state another test left behind.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from vlnpilot.scene import Scene, load_scene
+
+
+@pytest.fixture(scope="session")
+def scene() -> Scene:
+    """The built-in cabin scene (immutable)."""
+    return load_scene("cabin")
+
+
+@pytest.fixture(scope="session")
+def sim():
+    """A default `Simulator` on the cabin (640x480 cameras), shared by the session; reset it before use."""
+    from vlnpilot.sim import Simulator
+
+    simulator = Simulator("cabin")
+    yield simulator
+    simulator.close()
+
+
+@pytest.fixture(scope="session")
+def geo_sim():
+    """A render-free simulator (1x1 black images) for fast geometry and collision tests; reset it before use."""
+    from vlnpilot.sim import SimConfig, Simulator
+
+    simulator = Simulator("cabin", SimConfig(render=False))
+    yield simulator
+    simulator.close()
