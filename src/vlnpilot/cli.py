@@ -18,7 +18,7 @@ app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor dron
 scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True)
 app.add_typer(scene_app, name="scene")
 console = Console(soft_wrap=True)
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wrapping at 80 columns)
 
 SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name.")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
@@ -135,6 +135,21 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
     console.print(f"run directory: {run_dir}")
+
+
+@app.command("serve")
+def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
+          port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8000,
+          pilot: Annotated[str | None, typer.Option("--pilot", help="Default pilot SPEC.")] = None) -> None:
+    """Serve pilots over HTTP (POST /v1/decide, GET /healthz, OpenAPI at /docs); VLN_PILOT_TOKEN sets a bearer token."""
+    from vlnpilot.server.app import serve as run_server
+
+    if pilot is None:
+        pilot, why = default_pilot_spec()
+        if pilot == "oracle":  # the oracle needs the simulator's ground truth, which a server does not have
+            pilot, why = "openai", "the default model pilot; set OPENAI_API_KEY"
+        console.print(f"default pilot: [bold]{pilot}[/bold] ({why})")
+    run_server(host=host, port=port, pilot_spec=pilot)
 
 
 def main() -> None:

@@ -26,9 +26,11 @@ class Usage(BaseModel):
     output_tokens: int = 0
     latency_s: float = 0.0
     cost_usd: float = 0.0
+    priced: bool = True  # False when the model is missing from the price table (cost then reads 0)
 
     def __add__(self, other: Usage) -> Usage:
-        return Usage(**{k: getattr(self, k) + getattr(other, k) for k in Usage.model_fields})
+        sums = {k: getattr(self, k) + getattr(other, k) for k in Usage.model_fields if k != "priced"}
+        return Usage(**sums, priced=self.priced and other.priced)
 
 
 class Decision(BaseModel):

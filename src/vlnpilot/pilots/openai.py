@@ -1,0 +1,162 @@
+"""The OpenAI pilot (the paper's GPT runs): the official `openai` SDK, Chat Completions, strict JSON schema.
+
+`base_url` (or env OPENAI_BASE_URL) points it at any OpenAI-compatible server (vLLM, Ollama, LM Studio,
+llama.cpp): there the key is optional. Servers that reject `json_schema` structured output get JSON mode
+(`json_object`) instead, once, and the reply is validated locally as always.
+
+Image detail defaults to "low": the front camera renders 640x480, "low" sends it as one 512 px image for a
+flat 85 tokens, while "high" upsamples it to 1024x768 tiles for ~765 tokens (9x the image cost and more
+latency) without adding pixels the camera never had. Rooms, doors and a target object remain readable at
+512 px; pass detail="high" or "auto" to compare.
+"""
+
+from __future__ import annotations
+
+import base64
+import logging
+import os
+from typing import Any, Literal
+
+import openai as openai_sdk
+
+from vlnpilot.errors import ConfigError
+from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, redact, resolve_api_key
+from vlnpilot.pilots.base import PilotError, register_pilot
+
+log = logging.getLogger(__name__)
+
+ResponseFormat = Literal["auto", "json_schema", "json_object", "none"]
+SCHEMA_NAME = "vln_pilot_decision"
+_FORMAT_HINTS = ("response_format", "json_schema", "schema", "structured", "grammar", "not supported",
+                 "unsupported", "json_object")
+
+
+@register_pilot("openai")
+class OpenAIPilot(ModelPilot):
+    """GPT (or any OpenAI-compatible model) as the pilot.
+
+    Options: model (default gpt-4.1), api_key (default env OPENAI_API_KEY), base_url (default env
+    OPENAI_BASE_URL), detail ("low" | "high" | "auto"), response_format ("auto": json_schema with a
+    fallback to json_object; or "json_schema", "json_object", "none"), max_tokens_param
+    ("max_completion_tokens" for api.openai.com, "max_tokens" for other servers by default),
+    extra_body (dict merged into the request, e.g. vLLM sampling options), and the common options of
+    ModelPilot (timeout, max_retries, max_output_tokens, temperature, jpeg_quality, max_side, validate, prices).
+    """
+
+    name = "openai"
+    provider = "OpenAI"
+    default_model = "gpt-4.1"
+    key_envs = ("OPENAI_API_KEY",)
+
+    def __init__(
+        self,
+        model: str | None = None,
+        *,
+        api_key: str | None = None,
+        base_url: str | None = None,
+        detail: Literal["low", "high", "auto"] = "low",
+        response_format: ResponseFormat = "auto",
+        max_tokens_param: Literal["max_completion_tokens", "max_tokens"] | None = None,
+        extra_body: dict[str, Any] | None = None,
+        **options: Any,
+    ):
+        super().__init__(model, **options)
+        if detail not in ("low", "high", "auto"):
+            raise ConfigError(f"detail must be low, high or auto, got {detail!r}")
+        if response_format not in ("auto", "json_schema", "json_object", "none"):
+            raise ConfigError(f"response_format must be auto, json_schema, json_object or none, "
+                              f"got {response_format!r}")
+        self.base_url = base_url or os.environ.get("OPENAI_BASE_URL") or None
+        if self.base_url is not None and "api.openai.com" not in self.base_url:
+            self.provider = "OpenAI-compatible"
+        # A local server needs no key; the official API does (a missing key is fatal and names the env var).
+        key = resolve_api_key(api_key, self.key_envs, "OpenAI", optional=self.base_url is not None) or "EMPTY"
+        self.detail = detail
+        self.response_format = response_format
+        self._format = "json_schema" if response_format == "auto" else response_format
+        self.max_tokens_param = max_tokens_param or ("max_tokens" if self.base_url else "max_completion_tokens")
+        self.extra_body = dict(extra_body or {})
+        self._secret = Secret(key)
+        self._client = openai_sdk.OpenAI(api_key=key, base_url=self.base_url, timeout=self.timeout,
+                                         max_retries=self.max_retries)
+
+    def __repr__(self) -> str:
+        return f"OpenAIPilot(model={self.model!r}, base_url={self.base_url!r}, detail={self.detail!r})"
+
+    # ------------------------------------------------------------ request
+    def _messages(self, prompt: Any) -> list[dict[str, Any]]:
+        # Stable parts first: OpenAI and vLLM prefix caches hit on system + context + state prompt.
+        image_url = "data:image/jpeg;base64," + base64.b64encode(prompt.image_jpeg).decode("ascii")
+        return [
+            {"role": "system", "content": prompt.system},
+            {"role": "user", "content": [
+                {"type": "text", "text": prompt.context},
+                {"type": "text", "text": prompt.state_prompt},
+                {"type": "image_url", "image_url": {"url": image_url, "detail": self.detail}},
+                {"type": "text", "text": prompt.step_text},
+            ]},
+        ]
+
+    def _kwargs(self, prompt: Any, fmt: str) -> dict[str, Any]:
+        kwargs: dict[str, Any] = {"model": self.model, "messages": self._messages(prompt),
+                                  self.max_tokens_param: self.max_output_tokens}
+        if self.temperature is not None:
+            kwargs["temperature"] = self.temperature
+        if fmt == "json_schema":
+            kwargs["response_format"] = {"type": "json_schema", "json_schema": {
+                "name": SCHEMA_NAME, "strict": True, "schema": prompt.schema}}
+        elif fmt == "json_object":
+            kwargs["response_format"] = {"type": "json_object"}
+        if self.extra_body:
+            kwargs["extra_body"] = self.extra_body
+        return kwargs
+
+    def _error(self, exc: BaseException) -> PilotError:
+        return map_stainless_error(exc, openai_sdk, provider=self.provider, key_env="OPENAI_API_KEY",
+                                   model=self.model, base_url=self.base_url, timeout_s=self.timeout)
+
+    def _call(self, prompt: Any) -> Reply:
+        fmt = self._format
+        try:
+            try:
+                response = self._client.chat.completions.create(**self._kwargs(prompt, fmt))
+            except (openai_sdk.BadRequestError, openai_sdk.UnprocessableEntityError) as exc:
+                if not (self.response_format == "auto" and fmt == "json_schema" and _rejects_format(exc)):
+                    raise
+                log.warning("%s rejected json_schema structured output (%s); using JSON mode from now on",
+                            self.provider, redact(getattr(exc, "message", exc))[:200])
+                self._format = fmt = "json_object"
+                response = self._client.chat.completions.create(**self._kwargs(prompt, fmt))
+        except openai_sdk.OpenAIError as exc:
+            raise self._error(exc) from None
+        return _reply(response)
+
+
+def _rejects_format(exc: BaseException) -> bool:
+    text = f"{getattr(exc, 'message', '')} {getattr(exc, 'body', '')}".lower()
+    return any(hint in text for hint in _FORMAT_HINTS)
+
+
+def _reply(response: Any) -> Reply:
+    usage = getattr(response, "usage", None)
+    details = getattr(usage, "prompt_tokens_details", None)
+    counts = {
+        "input_tokens": getattr(usage, "prompt_tokens", 0) or 0,
+        "cached_tokens": getattr(details, "cached_tokens", 0) or 0,
+        "output_tokens": getattr(usage, "completion_tokens", 0) or 0,
+    }
+    choices = getattr(response, "choices", None) or []
+    if not choices:
+        return Reply(text=None, stop_detail="no choices in the response", **counts)
+    choice = choices[0]
+    message = choice.message
+    finish = choice.finish_reason or ""
+    refusal = getattr(message, "refusal", None)
+    text = message.content if isinstance(message.content, str) else None
+    if refusal:
+        return Reply(text=text, stop="refusal", stop_detail=str(refusal), **counts)
+    if finish == "length":
+        return Reply(text=text, stop="truncated", stop_detail="finish_reason=length", **counts)
+    if finish == "content_filter":
+        return Reply(text=text, stop="content_filter", stop_detail="finish_reason=content_filter", **counts)
+    return Reply(text=text, stop_detail=f"finish_reason={finish}", **counts)

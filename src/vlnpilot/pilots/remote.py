@@ -1,0 +1,180 @@
+"""The remote pilot: asks our own pilot server (`vln-pilot serve`) over HTTP, `POST {url}/v1/decide`.
+
+`remote` uses the server's default pilot; `remote:gemini:gemini-2.5-flash` asks the server for that pilot.
+The server already retried the provider, so a structured provider error (502/503 with a `reason`) is
+raised as the same PilotError at once; only transport failures and bare 408/409/429/5xx (a proxy, a
+restarting server) are retried here, honouring Retry-After.
+"""
+
+from __future__ import annotations
+
+import base64
+import os
+import time
+from typing import Any
+
+import httpx
+
+from vlnpilot.errors import ConfigError
+from vlnpilot.pilots._common import (
+    REPLY_REASONS,
+    PilotReplyError,
+    call_with_retries,
+    connection_error,
+    is_retryable_status,
+    parse_retry_after,
+    redact,
+    status_error,
+    timeout_error,
+)
+from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
+
+URL_ENV = "VLN_PILOT_URL"
+TOKEN_ENV = "VLN_PILOT_TOKEN"
+DEFAULT_URL = "http://127.0.0.1:8000"
+# The server's own provider call may take its timeout (30 s) times its retries: wait longer than that.
+DEFAULT_TIMEOUT_S = 90.0
+
+
+class _Retryable(Exception):
+    def __init__(self, response: httpx.Response):
+        super().__init__(f"HTTP {response.status_code}")
+        self.response = response
+
+
+@register_pilot("remote")
+class RemotePilot:
+    """A pilot that lives on a pilot server.
+
+    Options: model (the server-side pilot SPEC, e.g. "openai:gpt-4.1"; default: the server's),
+    url (default env VLN_PILOT_URL or http://127.0.0.1:8000), token (default env VLN_PILOT_TOKEN),
+    timeout (seconds per HTTP call, default 90), max_retries (default 2), retry_base_delay,
+    jpeg_quality, max_side, transport (an httpx transport, for tests).
+    """
+
+    name = "remote"
+
+    def __init__(
+        self,
+        model: str | None = None,
+        *,
+        url: str | None = None,
+        token: str | None = None,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        max_retries: int = 2,
+        retry_base_delay: float = 0.5,
+        jpeg_quality: int = 85,
+        max_side: int | None = None,
+        transport: httpx.BaseTransport | None = None,
+    ):
+        if not (isinstance(timeout, int | float) and timeout > 0):
+            raise ConfigError(f"timeout must be a positive number of seconds, got {timeout!r}")
+        if not (isinstance(max_retries, int) and max_retries >= 0):
+            raise ConfigError(f"max_retries must be an integer >= 0, got {max_retries!r}")
+        self.model = model
+        self.url = (url or os.environ.get(URL_ENV) or DEFAULT_URL).rstrip("/")
+        if not self.url.startswith(("http://", "https://")):
+            raise ConfigError(f"the pilot server URL must start with http:// or https://, got {self.url!r}")
+        self.timeout = float(timeout)
+        self.max_retries = max_retries
+        self.retry_base_delay = float(retry_base_delay)
+        self.jpeg_quality = jpeg_quality
+        self.max_side = max_side
+        token = token or os.environ.get(TOKEN_ENV) or None
+        headers = {"Authorization": f"Bearer {token}"} if token else {}
+        self._client = httpx.Client(base_url=self.url, timeout=self.timeout, headers=headers, transport=transport)
+
+    def __repr__(self) -> str:
+        return f"RemotePilot(url={self.url!r}, model={self.model!r})"
+
+    def close(self) -> None:
+        self._client.close()
+
+    def _payload(self, pilot_input: PilotInput) -> dict[str, Any]:
+        from vlnpilot.prompting import encode_jpeg
+
+        jpeg = encode_jpeg(pilot_input.image, self.jpeg_quality, self.max_side)
+        payload: dict[str, Any] = {
+            "image": base64.b64encode(jpeg).decode("ascii"),
+            "query": pilot_input.query,
+            "topological_map": pilot_input.topological_map,
+            "state": str(pilot_input.state),
+            "previous_movement": pilot_input.previous_movement,
+            "profile": pilot_input.profile,
+            "feedback": list(pilot_input.feedback),
+            "step": pilot_input.step,
+        }
+        if self.model:
+            payload["pilot"] = self.model
+        return payload
+
+    def _post(self, payload: dict[str, Any]) -> httpx.Response:
+        response = self._client.post("/v1/decide", json=payload)
+        if is_retryable_status(response.status_code) and not _structured(response):
+            raise _Retryable(response)
+        return response
+
+    def _classify(self, exc: BaseException) -> tuple[bool, float | None]:
+        if isinstance(exc, _Retryable):
+            return True, parse_retry_after(exc.response.headers)
+        return isinstance(exc, httpx.TransportError), None
+
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        payload = self._payload(pilot_input)
+        t0 = time.perf_counter()
+        try:
+            response = call_with_retries(lambda: self._post(payload), classify=self._classify,
+                                         max_retries=self.max_retries, base_delay=self.retry_base_delay,
+                                         what=f"pilot server {self.url}")
+        except _Retryable as exc:
+            response = exc.response
+        except httpx.TimeoutException:
+            raise timeout_error(f"pilot server at {self.url}", self.timeout) from None
+        except httpx.TransportError as exc:
+            raise connection_error("pilot server", self.url, exc) from None
+        latency = time.perf_counter() - t0
+        if response.status_code == 200:
+            try:
+                decision = Decision.model_validate(response.json())
+            except ValueError as exc:
+                raise PilotError(f"the pilot server at {self.url} sent a malformed decision: {redact(exc)[:300]}",
+                                 reason="bad_response") from None
+            return decision.model_copy(update={"usage": decision.usage.model_copy(update={"latency_s": round(
+                latency, 4)})})
+        raise self._error(response)
+
+    def _error(self, response: httpx.Response) -> PilotError:
+        status = response.status_code
+        body = _json(response)
+        detail = str(body.get("detail", "")) if body else response.text[:300]
+        reason = str(body.get("reason", "")) if body else ""
+        if status == 401:
+            return PilotError(f"the pilot server at {self.url} rejected the token (401): check {TOKEN_ENV}",
+                              fatal=True, reason="auth")
+        if status == 413:
+            return PilotError(f"the pilot server at {self.url} refused the request as too large (413): {detail}",
+                              fatal=True, reason="too_large")
+        if status == 422:
+            return PilotError(f"the pilot server at {self.url} rejected the request (422): {detail}",
+                              fatal=True, reason=reason or "bad_request")
+        if body and reason:
+            if reason in REPLY_REASONS:
+                usage = body.get("usage")
+                return PilotReplyError(detail, reason=reason, raw_text=body.get("raw_text"),
+                                       usage=Usage.model_validate(usage) if isinstance(usage, dict) else None)
+            return PilotError(detail, fatal=bool(body.get("fatal", False)), reason=reason)
+        return status_error(f"pilot server at {self.url}", status, detail, key_env=TOKEN_ENV, model=self.model)
+
+
+def _json(response: httpx.Response) -> dict[str, Any] | None:
+    try:
+        body = response.json()
+    except ValueError:
+        return None
+    return body if isinstance(body, dict) else None
+
+
+def _structured(response: httpx.Response) -> bool:
+    """Our server's ErrorBody (the pilot behind it already retried): do not retry it again."""
+    body = _json(response)
+    return bool(body and "reason" in body and "detail" in body)

@@ -1,0 +1,389 @@
+"""The pilot server (the paper's "VLLM Server", FastAPI instead of Flask): one decision per HTTP request.
+
+`POST /v1/decide` takes the paper's five inputs (image as base64 JPEG/PNG, query, topological map,
+state, previous movement) plus the FSM profile and controller feedback, asks a pilot, and returns
+its Decision. `GET /healthz` says the server is up; the OpenAPI docs are at /docs.
+
+Errors are JSON (`ErrorBody`), never a traceback: 401 bad/missing bearer token, 413 body too large,
+422 bad field or image, 502 the provider failed or its reply was unusable, 503 the provider is
+unavailable or rate limiting. `reason` and `fatal` carry the pilot's own PilotError fields, so the
+`remote` pilot can raise the same error on the client side.
+"""
+
+from __future__ import annotations
+
+import base64
+import binascii
+import hmac
+import io
+import logging
+import os
+import threading
+from collections.abc import Callable, Collection
+from typing import Any, Literal
+
+import numpy as np
+from fastapi import Depends, FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
+from pydantic import BaseModel, ConfigDict, Field
+from starlette.exceptions import HTTPException as StarletteHTTPException
+
+from vlnpilot.commands import COMMANDS, get_command
+from vlnpilot.errors import UnknownNameError, VLNPilotError
+from vlnpilot.fsm import PROFILES, State, parse_state
+from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
+from vlnpilot.pilots.base import DOOR_POSITIONS, Pilot, PilotError, PilotInput, Usage, make_pilot, parse_spec
+
+log = logging.getLogger(__name__)
+
+TOKEN_ENV = "VLN_PILOT_TOKEN"
+DEFAULT_MAX_BODY_BYTES = 8 * 1024 * 1024
+MAX_IMAGE_SIDE = 4096
+# Pilots a client may pick by default: the model pilots. `stdin` would block the server, `oracle` needs
+# ground truth the server does not have, `remote` could loop back.
+DEFAULT_ALLOWED_PILOTS = ("openai", "gemini", "anthropic")
+
+
+# ------------------------------------------------------------------------------------------ wire models
+
+def _tiny_jpeg_b64() -> str:
+    from PIL import Image
+
+    buf = io.BytesIO()
+    Image.new("RGB", (8, 6), (120, 140, 160)).save(buf, format="JPEG", quality=70)
+    return base64.b64encode(buf.getvalue()).decode("ascii")
+
+
+_ASKED_STATES = tuple(s.value for s in State if s not in (State.START, State.FINAL))
+AskedState = Literal[_ASKED_STATES]  # type: ignore[valid-type]
+CommandCode = Literal[tuple(COMMANDS)]  # type: ignore[valid-type]
+Profile = Literal[PROFILES]  # type: ignore[valid-type]
+
+
+class DecideRequest(BaseModel):
+    """One step's inputs (the paper's five, plus the FSM profile, controller feedback and the pilot to ask)."""
+
+    model_config = ConfigDict(extra="forbid", strict=True, json_schema_extra={"examples": [{
+        "image": _tiny_jpeg_b64(), "query": "Go to the kitchen", "state": "Recognize Room",
+        "topological_map": {"nodes": [{"id": "hall", "name": "Hall"}, {"id": "kitchen", "name": "Kitchen"}],
+                            "edges": [{"from": "hall", "to": "kitchen"}]},
+        "previous_movement": None}]})
+
+    image: str = Field(description="front camera image: base64 JPEG or PNG (a data: URL is accepted)", min_length=1)
+    query: str = Field(description="the user's query", min_length=1, max_length=2000)
+    topological_map: dict[str, Any] = Field(description="rooms (nodes) and open doors (edges), as JSON")
+    state: AskedState = Field(description="current FSM state (Start and Final are never asked)")
+    previous_movement: CommandCode | None = Field(default=None, description="previous command code, or null")
+    profile: Profile = Field(default="paper", description="FSM profile: which moves each state allows")
+    feedback: list[str] = Field(default_factory=list, description="controller feedback lines for a re-ask",
+                                max_length=20)
+    step: int = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
+    pilot: str | None = Field(default=None, description="pilot SPEC (name or name:model); default: the server's",
+                              max_length=200)
+
+
+class DecideResponse(BaseModel):
+    """The pilot's Decision: the paper's five fields, plus usage and the model that answered."""
+
+    room: str
+    movement: str
+    state: str
+    description: str = ""
+    door_position: str = Field(default="not_visible", json_schema_extra={"enum": list(DOOR_POSITIONS)})
+    usage: Usage
+    model: str | None = None
+    raw_text: str | None = None
+
+
+class ErrorBody(BaseModel):
+    """Every error response: a message, a short reason code, and whether asking again can help."""
+
+    detail: str
+    reason: str
+    fatal: bool = False
+    errors: list[dict[str, Any]] | None = None  # field errors of a 422
+    raw_text: str | None = None  # the model's unusable reply (502 with a reply reason)
+    usage: Usage | None = None
+
+
+class Health(BaseModel):
+    status: str
+    pilot: str
+
+
+class ApiError(Exception):
+    def __init__(self, status: int, detail: str, reason: str, *, fatal: bool = False,
+                 headers: dict[str, str] | None = None, **extra: Any):
+        super().__init__(detail)
+        self.status, self.detail, self.reason, self.fatal = status, detail, reason, fatal
+        self.headers = headers
+        self.extra = extra
+
+
+def _error_response(status: int, body: ErrorBody, headers: dict[str, str] | None = None) -> JSONResponse:
+    return JSONResponse(status_code=status, content=body.model_dump(mode="json", exclude_none=True), headers=headers)
+
+
+_ERRORS = {code: {"model": ErrorBody} for code in (400, 401, 413, 422, 502, 503)}
+
+
+# ------------------------------------------------------------------------------------------ body limit
+
+class BodyLimitMiddleware:
+    """Answer 413 to a request body over `max_bytes` (by Content-Length, or counted while streaming)."""
+
+    def __init__(self, app: Any, max_bytes: int):
+        self.app, self.max_bytes = app, max_bytes
+
+    async def _too_large(self, send: Any) -> None:
+        body = ErrorBody(detail=f"request body over the limit of {self.max_bytes} bytes", reason="too_large",
+                         fatal=True).model_dump_json(exclude_none=True).encode()
+        await send({"type": "http.response.start", "status": 413,
+                    "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
+                                (b"connection", b"close")]})
+        await send({"type": "http.response.body", "body": body})
+
+    async def __call__(self, scope: Any, receive: Any, send: Any) -> None:
+        if scope["type"] != "http" or scope.get("method") in ("GET", "HEAD", "OPTIONS"):
+            await self.app(scope, receive, send)
+            return
+        for name, value in scope.get("headers", ()):
+            if name == b"content-length":
+                try:
+                    declared = int(value)
+                except ValueError:
+                    declared = 0
+                if declared > self.max_bytes:
+                    await self._too_large(send)
+                    return
+        chunks: list[bytes] = []
+        total = 0
+        while True:
+            message = await receive()
+            if message["type"] != "http.request":  # client went away
+                return
+            chunk = message.get("body", b"")
+            total += len(chunk)
+            if total > self.max_bytes:
+                await self._too_large(send)
+                return
+            chunks.append(chunk)
+            if not message.get("more_body", False):
+                break
+        body = b"".join(chunks)
+        sent = False
+
+        async def replay() -> Any:
+            nonlocal sent
+            if not sent:
+                sent = True
+                return {"type": "http.request", "body": body, "more_body": False}
+            return await receive()
+
+        await self.app(scope, replay, send)
+
+
+# ------------------------------------------------------------------------------------------ decoding
+
+def decode_image(data: str) -> np.ndarray:
+    """A base64 JPEG or PNG (optionally a data: URL) as an HxWx3 uint8 RGB array; ApiError 422 otherwise."""
+    from PIL import Image, UnidentifiedImageError
+
+    text = data.strip()
+    if text.startswith("data:"):
+        head, _, text = text.partition(",")
+        if ";base64" not in head:
+            raise ApiError(422, "image data URL must be base64-encoded", "bad_image")
+    try:
+        raw = base64.b64decode(text, validate=True)
+    except (binascii.Error, ValueError):
+        try:
+            raw = base64.urlsafe_b64decode(text + "=" * (-len(text) % 4))
+        except (binascii.Error, ValueError):
+            raise ApiError(422, "image is not valid base64", "bad_image") from None
+    if raw[:3] == b"\xff\xd8\xff":
+        kind = "JPEG"
+    elif raw[:8] == b"\x89PNG\r\n\x1a\n":
+        kind = "PNG"
+    else:
+        raise ApiError(422, "image must be a base64 JPEG or PNG", "bad_image")
+    try:
+        with Image.open(io.BytesIO(raw)) as img:
+            if img.format != kind:
+                raise ApiError(422, f"image claims {kind} but decodes as {img.format}", "bad_image")
+            if max(img.size) > MAX_IMAGE_SIDE or min(img.size) < 1:
+                raise ApiError(422, f"image is {img.width}x{img.height}; each side must be 1..{MAX_IMAGE_SIDE}",
+                               "bad_image")
+            rgb = np.asarray(img.convert("RGB"), dtype=np.uint8)
+    except ApiError:
+        raise
+    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
+        raise ApiError(422, f"image cannot be decoded as {kind}: {exc}", "bad_image") from None
+    return np.ascontiguousarray(rgb)
+
+
+def _pilot_input(req: DecideRequest) -> PilotInput:
+    from vlnpilot.prompting import ASKED_STATES
+
+    try:
+        state = parse_state(req.state)
+    except UnknownNameError as exc:
+        raise ApiError(422, str(exc), "bad_state") from None
+    if state not in ASKED_STATES:
+        raise ApiError(422, f"the pilot is never asked in state '{state.value}'; asked states: "
+                            f"{', '.join(s.value for s in ASKED_STATES)}", "bad_state")
+    if req.profile not in PROFILES:
+        raise ApiError(422, f"unknown FSM profile {req.profile!r}; valid: {', '.join(PROFILES)}", "bad_profile")
+    previous = req.previous_movement
+    if previous is not None and previous.strip():
+        try:
+            previous = get_command(previous).code
+        except UnknownNameError as exc:
+            raise ApiError(422, str(exc), "bad_movement") from None
+    else:
+        previous = None
+    image = decode_image(req.image)
+    return PilotInput(image=image, query=req.query, topological_map=req.topological_map, state=state,
+                      previous_movement=previous, step=req.step, profile=req.profile,
+                      feedback=tuple(str(f)[:500] for f in req.feedback))
+
+
+# ------------------------------------------------------------------------------------------ the app
+
+def create_app(
+    pilot_factory: Callable[..., Pilot] = make_pilot,
+    token: str | None = None,
+    max_body_bytes: int = DEFAULT_MAX_BODY_BYTES,
+    *,
+    pilot_spec: str = "openai",
+    allowed_pilots: Collection[str] | None = None,
+    pilot_options: dict[str, Any] | None = None,
+) -> FastAPI:
+    """The pilot server as an ASGI app.
+
+    `pilot_factory(spec, **pilot_options)` builds a pilot (once per spec, then reused across requests);
+    `pilot_spec` is the default when a request names none; a request may name another pilot whose
+    name is in `allowed_pilots` (default: openai, gemini, anthropic and the default's name).
+    `token`: if set, every /v1 request needs `Authorization: Bearer <token>` (None: no auth).
+    """
+    default_name, _ = parse_spec(pilot_spec)
+    allowed = {parse_spec(p)[0] for p in (allowed_pilots if allowed_pilots is not None else DEFAULT_ALLOWED_PILOTS)}
+    allowed.add(default_name)
+    options = dict(pilot_options or {})
+    pilots: dict[str, Pilot] = {}
+    lock = threading.Lock()
+
+    app = FastAPI(
+        title="VLN-Pilot server",
+        version="1",
+        description="Ask a vision-language pilot for the next drone movement (the paper's VLLM server).",
+    )
+    app.add_middleware(BodyLimitMiddleware, max_bytes=max_body_bytes)
+    app.state.pilot_spec = pilot_spec
+    bearer = HTTPBearer(auto_error=False, description=f"the server's token (env {TOKEN_ENV})")
+
+    def check_token(credentials: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:  # noqa: B008
+        if token is None:
+            return
+        given = credentials.credentials if credentials is not None else ""
+        if not given or not hmac.compare_digest(given.encode(), token.encode()):
+            raise ApiError(401, "missing or wrong bearer token" + (f" (set {TOKEN_ENV} on the client)"),
+                           "unauthorized", fatal=True, headers={"WWW-Authenticate": "Bearer"})
+
+    def get_pilot(spec: str | None) -> Pilot:
+        spec = (spec or pilot_spec).strip()
+        name, _ = parse_spec(spec)
+        if name not in allowed:
+            raise ApiError(422, f"pilot {name!r} is not allowed on this server; allowed: {', '.join(sorted(allowed))}",
+                           "bad_pilot")
+        with lock:
+            pilot = pilots.get(spec)
+            if pilot is None:
+                try:
+                    pilot = pilot_factory(spec, **options)
+                except UnknownNameError as exc:
+                    raise ApiError(422, str(exc), "bad_pilot") from None
+                except PilotError as exc:
+                    raise _pilot_error(exc) from None
+                except VLNPilotError as exc:
+                    raise ApiError(422, f"cannot build pilot {spec!r}: {exc}", "bad_pilot") from None
+                pilots[spec] = pilot
+            return pilot
+
+    @app.exception_handler(ApiError)
+    async def _api_error(request: Request, exc: ApiError) -> JSONResponse:
+        return _error_response(exc.status, ErrorBody(detail=exc.detail, reason=exc.reason, fatal=exc.fatal,
+                                                     **exc.extra), exc.headers)
+
+    @app.exception_handler(RequestValidationError)
+    async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        errors = [{"loc": [str(p) for p in e.get("loc", ())], "msg": str(e.get("msg", "")), "type": str(e.get("type"))}
+                  for e in exc.errors()]
+        detail = "; ".join(f"{'.'.join(e['loc'][1:]) or 'body'}: {e['msg']}" for e in errors) or "invalid request"
+        return _error_response(422, ErrorBody(detail=detail, reason="bad_request", fatal=True, errors=errors))
+
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return _error_response(exc.status_code, ErrorBody(detail=str(exc.detail), reason="http_error", fatal=True),
+                               getattr(exc, "headers", None))
+
+    @app.exception_handler(Exception)
+    async def _crash(request: Request, exc: Exception) -> JSONResponse:
+        log.exception("unexpected error in %s %s", request.method, request.url.path)
+        return _error_response(500, ErrorBody(detail=f"internal error ({type(exc).__name__})", reason="internal"))
+
+    @app.get("/healthz", response_model=Health, tags=["server"])
+    def healthz() -> Health:
+        """Liveness: the server answers and names its default pilot (no provider call)."""
+        return Health(status="ok", pilot=pilot_spec)
+
+    @app.post("/v1/decide", response_model=DecideResponse, responses=_ERRORS, tags=["pilot"],
+              dependencies=[Depends(check_token)])
+    def decide(req: DecideRequest) -> DecideResponse:
+        """Ask the pilot for one decision (a blocking provider call, run in the worker thread pool)."""
+        pilot_input = _pilot_input(req)
+        pilot = get_pilot(req.pilot)
+        try:
+            decision = pilot.decide(pilot_input)
+        except PilotError as exc:
+            raise _pilot_error(exc) from None
+        except VLNPilotError as exc:
+            raise ApiError(502, f"the pilot failed: {exc}", "pilot_error") from None
+        except Exception as exc:
+            log.exception("pilot %r crashed", req.pilot or pilot_spec)
+            raise ApiError(502, f"the pilot crashed ({type(exc).__name__})", "pilot_crashed") from None
+        return DecideResponse(**decision.core(), usage=decision.usage, model=decision.model or pilot.model,
+                              raw_text=decision.raw_text)
+
+    return app
+
+
+def _pilot_error(exc: PilotError) -> ApiError:
+    status = 503 if exc.reason in TRANSIENT_REASONS else 502
+    extra: dict[str, Any] = {}
+    if getattr(exc, "raw_text", None) is not None:
+        extra["raw_text"] = exc.raw_text  # type: ignore[attr-defined]
+    if isinstance(getattr(exc, "usage", None), Usage):
+        extra["usage"] = exc.usage  # type: ignore[attr-defined]
+    return ApiError(status, redact(exc), exc.reason, fatal=exc.fatal, **extra)
+
+
+def app_from_env() -> FastAPI:
+    """For `uvicorn --factory vlnpilot.server.app:app_from_env`: pilot from VLN_PILOT_SPEC, token from
+    VLN_PILOT_TOKEN."""
+    return create_app(token=os.environ.get(TOKEN_ENV) or None, pilot_spec=os.environ.get("VLN_PILOT_SPEC", "openai"))
+
+
+def serve(host: str = "127.0.0.1", port: int = 8000, pilot_spec: str = "openai", *, token: str | None = None,
+          log_level: str = "info", **app_options: Any) -> None:
+    """Run the pilot server with uvicorn (blocking). The token defaults to env VLN_PILOT_TOKEN."""
+    import uvicorn
+
+    token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
+    if token is None and host not in ("127.0.0.1", "localhost", "::1"):
+        log.warning("serving on %s without a token: anyone who reaches it can spend your API credit; set %s",
+                    host, TOKEN_ENV)
+    app = create_app(token=token, pilot_spec=pilot_spec, **app_options)
+    uvicorn.run(app, host=host, port=port, log_level=log_level)

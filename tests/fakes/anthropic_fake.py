@@ -1,0 +1,97 @@
+"""A fake Anthropic Messages API server: `POST /v1/messages`.
+
+    with FakeAnthropic() as fake:
+        pilot = make_pilot("anthropic", base_url=fake.base_url, api_key="sk-ant-test")
+
+When the request forces a tool, decisions come back as that tool's `tool_use` input (as the real API
+does); plain text actions (text, prose, not_json) come back as a text block.
+"""
+
+from __future__ import annotations
+
+import uuid
+
+from ._server import FakeServer, RecordedRequest
+
+_ERROR_TYPES = {400: "invalid_request_error", 401: "authentication_error", 403: "permission_error",
+                404: "not_found_error", 408: "timeout_error", 413: "request_too_large", 429: "rate_limit_error",
+                500: "api_error", 529: "overloaded_error"}
+
+
+class FakeAnthropic(FakeServer):
+    provider = "anthropic"
+
+    def _route(self, method: str, path: str) -> str | None:
+        return "" if method == "POST" and path.rstrip("/") == "/v1/messages" else None
+
+    def _parse(self, req: RecordedRequest) -> None:
+        body = req.json
+        req.model = body.get("model")
+        system = body.get("system") or ""
+        req.system = system if isinstance(system, str) else "".join(b.get("text", "") for b in system)
+        for message in body.get("messages") or []:
+            content = message.get("content")
+            blocks = [{"type": "text", "text": content}] if isinstance(content, str) else (content or [])
+            for block in blocks:
+                if block.get("type") == "text":
+                    req.texts.append(block.get("text", ""))
+                    req.parts.append("text")
+                elif block.get("type") == "image":
+                    source = block.get("source") or {}
+                    req.image_media_types.append(source.get("media_type", ""))
+                    req.images.append(self._b64(source.get("data", "")))
+                    req.parts.append("image")
+        tools = body.get("tools") or []
+        choice = body.get("tool_choice") or {}
+        forced = next((t for t in tools if t.get("name") == choice.get("name")), tools[0] if tools else None)
+        if forced is not None:
+            req.schema = forced.get("input_schema")
+
+    def _tool_name(self, req: RecordedRequest) -> str | None:
+        body = req.json or {}
+        choice = body.get("tool_choice") or {}
+        if choice.get("type") == "tool":
+            return choice.get("name")
+        tools = body.get("tools") or []
+        return tools[0].get("name") if tools and choice.get("type") == "any" else None
+
+    def _message(self, req: RecordedRequest, content: list[dict], stop: str, usage_text: str) -> dict:
+        inp, cached, out = self._usage_counts(req, usage_text)
+        return {
+            "id": f"msg_{uuid.uuid4().hex[:24]}",
+            "type": "message",
+            "role": "assistant",
+            "model": req.model or "claude-sonnet-4-6",
+            "content": content,
+            "stop_reason": stop,
+            "stop_sequence": None,
+            "usage": {"input_tokens": inp - cached, "output_tokens": out, "cache_read_input_tokens": cached,
+                      "cache_creation_input_tokens": 0},
+        }
+
+    def _success(self, req: RecordedRequest, text: str, *, data: dict | None = None) -> dict:
+        tool = self._tool_name(req)
+        if data is not None and tool:
+            block = {"type": "tool_use", "id": f"toolu_{uuid.uuid4().hex[:20]}", "name": tool, "input": data}
+            return self._message(req, [block], "tool_use", text)
+        return self._message(req, [{"type": "text", "text": text}], "end_turn", text)
+
+    def _error_body(self, status: int, message: str, code: str) -> dict:
+        kind = _ERROR_TYPES.get(status, "api_error" if status >= 500 else "invalid_request_error")
+        return {"type": "error", "error": {"type": kind, "message": message},
+                "request_id": f"req_{uuid.uuid4().hex[:20]}"}
+
+    def _special(self, req: RecordedRequest, kind: str, params: dict) -> tuple[int, dict]:
+        if kind in ("refusal", "content_filter"):
+            text = params.get("message", "I can't help with piloting this request.")
+            return 200, self._message(req, [{"type": "text", "text": text}], "refusal", text)
+        if kind == "truncated":
+            tool = self._tool_name(req) or "submit_decision"
+            block = {"type": "tool_use", "id": f"toolu_{uuid.uuid4().hex[:20]}", "name": tool,
+                     "input": {"room": "kitchen"}}
+            return 200, self._message(req, [block], "max_tokens", "x" * 40)
+        if kind == "bad_key":
+            return 401, self._error_body(401, "invalid x-api-key", "")
+        if kind == "reject_schema":
+            return 400, self._error_body(400, "tools.0.input_schema: JSON schema is invalid", "")
+        raise ValueError(kind)
