@@ -10,6 +10,7 @@ from typing import Annotated
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 from vlnpilot.errors import VLNPilotError
 
@@ -116,18 +117,21 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     def show(rec: dict) -> None:
         if quiet:
             return
-        d = rec["decision"] or {}
+        d = rec["decision"] or {}  # model text is untrusted: escape it before Rich reads markup in it
         fail = f" [red]({len(rec['failures'])} rejected)[/red]" if rec["failures"] else ""
-        hit = f" [bold red]COLLISION with {rec['contact']}[/bold red]" if rec["collided"] else ""
+        hit = f" [bold red]COLLISION with {escape(str(rec['contact']))}[/bold red]" if rec["collided"] else ""
         console.print(f"[dim]{rec['step']:>3}[/dim] {rec['state']:<27} [bold]{rec['executed'] or '-':<2}[/bold] "
-                      f"-> {rec['next_state'] or '-':<27} room={d.get('room', '?'):<12}{fail}{hit} "
-                      f"[dim]{(d.get('description') or '')[:70]}[/dim]", highlight=False)
+                      f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
+                      f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
     with Simulator(sc) as env:
         recorder = Recorder(run_dir)
         try:
             result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
                                  pilot_spec=pilot)
+        except KeyboardInterrupt:
+            err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
+            raise typer.Exit(130) from None
         finally:
             recorder.close()
     colour = "green" if result.success else "red"
@@ -157,7 +161,7 @@ def main() -> None:
     try:
         app()
     except VLNPilotError as exc:
-        err_console.print(f"[bold red]error:[/bold red] {exc}", highlight=False)
+        err_console.print(f"[bold red]error:[/bold red] {escape(str(exc))}", highlight=False)
         sys.exit(2)
     except KeyboardInterrupt:
         err_console.print("interrupted: every step recorded so far is kept")

@@ -115,11 +115,13 @@ class Recorder:
         """Save both frames of a step as JPEG; returns their paths relative to the run directory."""
         if not self.save_frames:
             return {}
-        paths = self.frame_paths(step)
+        written = {}
         for key, img in (("front", front), ("rear", rear)):
             if img.size > 3:  # observations of a render-less simulator carry 1x1 placeholders
-                Image.fromarray(img).save(self.run_dir / paths[key], quality=self.jpeg_quality)
-        return paths
+                path = self.frame_paths(step)[key]
+                Image.fromarray(img).save(self.run_dir / path, quality=self.jpeg_quality)
+                written[key] = path
+        return written
 
     def start(self, summary: dict[str, Any]) -> None:
         self._summary = {"status": "running", **summary}

@@ -110,14 +110,19 @@ def register_pilot(name: str) -> Callable[[PilotFactory], PilotFactory]:
     return deco
 
 
-def _load_builtin_pilots() -> None:
-    # Imported lazily so that `import vlnpilot` stays light and optional SDKs stay optional.
+_BUILTIN_MODULES = {"oracle": "oracle", "openai": "openai", "gemini": "gemini", "anthropic": "anthropic",
+                    "remote": "remote", "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy"}
+
+
+def _load_builtin_pilots(only: str | None = None) -> None:
+    """Import pilot modules (lazily, so that the oracle never pays for the provider SDKs' import time)."""
     import importlib
 
-    for module in ("oracle", "openai", "gemini", "anthropic", "remote", "stdin", "replay", "noisy"):
+    modules = [_BUILTIN_MODULES[only]] if only in _BUILTIN_MODULES else sorted(set(_BUILTIN_MODULES.values()))
+    for module in modules:
         try:
             importlib.import_module(f"vlnpilot.pilots.{module}")
-        except ModuleNotFoundError as exc:  # a pilot whose module does not exist yet, or an SDK missing
+        except ModuleNotFoundError as exc:  # a pilot module that does not exist in this version
             if exc.name and exc.name.startswith("vlnpilot.pilots."):
                 continue
             raise
@@ -137,7 +142,9 @@ def parse_spec(spec: str) -> tuple[str, str | None]:
 def make_pilot(spec: str, **options: Any) -> Pilot:
     """Build a pilot from a SPEC (`name` or `name:model`); a bad name lists the known ones."""
     name, model = parse_spec(spec)
-    _load_builtin_pilots()
+    _load_builtin_pilots(only=name)
+    if name not in _REGISTRY:
+        _load_builtin_pilots()
     if name not in _REGISTRY:
         raise UnknownNameError("pilot", name, _REGISTRY)
     if model is not None:

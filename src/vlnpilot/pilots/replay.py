@@ -1,0 +1,98 @@
+"""The `replay` pilot: answers with the decisions of a recorded run, step by step.
+
+For regression tests of prompts and controller changes: record a run once (with any pilot), then fly the
+same decisions again (`--pilot replay:RUN_DIR`) and compare trajectories and outcomes. Each step replays what
+the controller saw that step: the rejected attempts first (re-parsed from their raw text where it was
+recorded, else raised again as malformed answers or pilot errors with the recorded reason), then the accepted
+decision. When the recording runs out the episode ends with a fatal PilotError.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from vlnpilot.errors import ConfigError
+from vlnpilot.pilots.base import Decision, PilotError, PilotInput, register_pilot
+from vlnpilot.prompting import DecisionError, parse_decision
+from vlnpilot.record import load_run
+
+_MALFORMED = "malformed answer: "
+_INVALID_PREFIXES = ("movement ", "next state ")  # validate_decision's reasons
+
+
+@register_pilot("replay")
+class ReplayPilot:
+    """Replays `run_dir`'s episode.jsonl (`make_pilot("replay:RUN_DIR")` or `make_pilot("replay", run_dir=...)`).
+
+    `strict=True` also ends the episode (fatal PilotError) as soon as the controller's state differs from the
+    recorded one: the replay has diverged from the recording.
+    """
+
+    name = "replay"
+
+    def __init__(self, model: str | None = None, *, run_dir: str | Path | None = None, strict: bool = False):
+        source = run_dir if run_dir is not None else model
+        if source is None:
+            raise ConfigError("the replay pilot needs a recorded run: use --pilot replay:RUN_DIR "
+                              "(or make_pilot('replay', run_dir=...))")
+        self.run_dir = Path(source)
+        self.strict = strict
+        summary, steps = load_run(self.run_dir)
+        self.summary = summary
+        self.steps: dict[int, dict[str, Any]] = {int(rec["step"]): rec for rec in steps if "step" in rec}
+        self.model = f"replay:{self.run_dir}"
+        self._step: int | None = None
+        self._attempt = 0
+
+    @property
+    def last_step(self) -> int:
+        return max(self.steps, default=0)
+
+    def _attempts(self, rec: dict[str, Any]) -> list[dict[str, Any] | None]:
+        """What the pilot answered at a recorded step, in order: failure dicts, then None for the decision."""
+        out: list[dict[str, Any] | None] = list(rec.get("failures") or [])
+        if rec.get("decision") is not None:
+            out.append(None)
+        return out
+
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        step = pilot_input.step
+        rec = self.steps.get(step)
+        if rec is None:
+            raise PilotError(f"recording exhausted at step {step} ({self.run_dir} has {self.last_step} steps)",
+                             fatal=True, reason="replay_exhausted")
+        if self.strict and rec.get("state") != pilot_input.state.value:
+            raise PilotError(f"replay diverged at step {step}: recorded state {rec.get('state')!r}, "
+                             f"now {pilot_input.state.value!r}", fatal=True, reason="replay_diverged")
+        reask = step == self._step and bool(pilot_input.feedback)  # a re-ask always carries the rejection
+        self._attempt = self._attempt + 1 if reask else 0
+        self._step = step
+        attempts = self._attempts(rec)
+        if not attempts:
+            raise PilotError(f"recording exhausted at step {step} (no answer recorded)", fatal=True,
+                             reason="replay_exhausted")
+        index = min(self._attempt, len(attempts) - 1)  # asked more often than recorded: repeat the last answer
+        item = attempts[index]
+        if item is None:
+            return self._decision(rec)
+        fatal = rec.get("executed") is None and index == len(attempts) - 1  # the step that ended the episode
+        return self._failure(item, fatal)
+
+    def _decision(self, rec: dict[str, Any]) -> Decision:
+        return Decision(**rec["decision"], raw_text=rec.get("raw_text"), model=rec.get("model"))
+
+    def _failure(self, failure: dict[str, Any], fatal: bool) -> Decision:
+        reason = str(failure.get("reason") or "")
+        raw = failure.get("raw_text")
+        if raw is not None and not fatal:
+            return parse_decision(raw)  # the model's rejected reply: the controller rejects it again
+        if fatal:
+            kind, _, message = reason.partition(": ")
+            raise PilotError(message or reason, fatal=True, reason=kind if message else "pilot_error")
+        if reason.startswith(_MALFORMED):
+            raise DecisionError(reason[len(_MALFORMED):])
+        if reason.startswith(_INVALID_PREFIXES):  # an invalid decision recorded without its raw text
+            raise DecisionError(reason)
+        kind, _, message = reason.partition(": ")
+        raise PilotError(message or reason, fatal=False, reason=kind if message else "pilot_error")

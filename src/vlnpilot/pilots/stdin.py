@@ -1,0 +1,106 @@
+"""The `stdin` pilot: a person (the human baseline) or any external program flies the drone over text streams.
+
+Each step it prints the rendered prompt (the system prompt once per episode, then the user text), writes the
+front image to a JPEG file and prints its path, then reads one Decision as a JSON line from standard input.
+The controller validates the answer exactly as it validates a model's, and re-asks with the reason.
+
+    vln-pilot run "Go to the bedroom" --pilot stdin
+    {"room": "living_room", "movement": "C2", "state": "Search Open Door", "description": "...",
+     "door_position": "left"}          <- typed as ONE line
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import IO, Any
+
+from vlnpilot.errors import ConfigError
+from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
+from vlnpilot.prompting import build_prompt, parse_decision
+
+RULE = "=" * 100
+
+
+@register_pilot("stdin")
+class StdinPilot:
+    """Prompts on `output` (default standard error), reads one JSON line per answer from `input` (default stdin).
+
+    Options: `image_dir` (where front images go; default a fresh temporary directory), `input`/`output` streams
+    (for tests and embedding), `jpeg_quality`, `show_system` (print the system prompt at the start of each
+    episode; default True).
+    """
+
+    name = "stdin"
+
+    def __init__(self, model: str | None = None, *, image_dir: str | Path | None = None, input: IO[str] | None = None,
+                 output: IO[str] | None = None, jpeg_quality: int = 85, show_system: bool = True, **options: Any):
+        if options:
+            raise ConfigError(f"unknown option(s) for the stdin pilot: {', '.join(sorted(options))}; "
+                              "valid options: image_dir, input, output, jpeg_quality, show_system")
+        self.model = model or "stdin"
+        self._input, self._output = input, output
+        self.jpeg_quality = jpeg_quality
+        self.show_system = show_system
+        if image_dir is None:
+            image_dir = tempfile.mkdtemp(prefix="vlnpilot-stdin-")
+        self.image_dir = Path(image_dir)
+        try:
+            self.image_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise ConfigError(f"cannot create image_dir {self.image_dir}: {exc.strerror or exc}") from None
+        self._last_step: int | None = None
+        self._episode = 0
+        self._attempt = 0
+
+    # Streams are looked up at call time, so that a redirected sys.stdin/sys.stderr (pytest, CliRunner) is used.
+    @property
+    def input(self) -> IO[str]:
+        return self._input if self._input is not None else sys.stdin
+
+    @property
+    def output(self) -> IO[str]:
+        return self._output if self._output is not None else sys.stderr
+
+    def _reask(self, pilot_input: PilotInput) -> bool:
+        """The controller asks again within the same step, with the rejection as feedback."""
+        return pilot_input.step == self._last_step and bool(pilot_input.feedback)
+
+    def _new_episode(self, pilot_input: PilotInput) -> bool:
+        return self._last_step is None or (pilot_input.step <= self._last_step and not self._reask(pilot_input))
+
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        prompt = build_prompt(pilot_input, jpeg_quality=self.jpeg_quality)
+        if self._new_episode(pilot_input):
+            self._episode += 1
+            self._attempt = 0
+            if self.show_system:
+                self._print(f"{RULE}\nSYSTEM PROMPT\n{RULE}\n{prompt.system.rstrip()}\n")
+        self._attempt = self._attempt + 1 if self._reask(pilot_input) else 0
+        self._last_step = pilot_input.step
+
+        suffix = f"_{self._attempt}" if self._attempt else ""
+        image_path = self.image_dir / f"ep{self._episode:03d}_front_{pilot_input.step:03d}{suffix}.jpg"
+        image_path.write_bytes(prompt.image_jpeg)
+        reask = f" (re-ask {self._attempt})" if self._attempt else ""
+        self._print(f"{RULE}\nSTEP {pilot_input.step} - {pilot_input.state.value}{reask}\n{RULE}\n"
+                    f"{prompt.user_text().rstrip()}\n\n"
+                    f"image: {image_path}\n"
+                    "answer with ONE line of JSON: room, movement, state, description, door_position\n> ")
+
+        t0 = time.perf_counter()
+        line = ""
+        while not line.strip():  # blank lines (an Enter pressed twice) are not answers
+            line = self.input.readline()
+            if line == "":
+                raise PilotError("stdin closed", fatal=True, reason="stdin_closed")
+        latency = time.perf_counter() - t0
+        decision = parse_decision(line.strip())  # DecisionError: the controller re-asks with the reason
+        return decision.model_copy(update={"model": self.model, "usage": Usage(latency_s=round(latency, 4))})
+
+    def _print(self, text: str) -> None:
+        out = self.output
+        out.write(text if text.endswith(("\n", "> ")) else text + "\n")
+        out.flush()
