@@ -93,8 +93,10 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
         profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
-        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False) -> None:
-    """Fly one episode on the embedded simulator and record it."""
+        quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
+        video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
+        ) -> None:
+    """Fly one episode on the embedded simulator, record it and write its report."""
     from vlnpilot.episode import EpisodeConfig, run_episode
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.record import Recorder, check_writable, default_run_dir
@@ -138,7 +140,38 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
-    console.print(f"run directory: {run_dir}")
+    report = _write_episode_report(run_dir, video=video)
+    console.print(f"run directory: {escape(str(run_dir))}  (report: {escape(str(report))})")
+
+
+def _write_episode_report(run_dir: Path, *, video: bool = True) -> Path:
+    from vlnpilot.report.html import write_episode_report
+    from vlnpilot.report.video import write_episode_video
+
+    if video:  # first, so that the page links the video
+        write_episode_video(run_dir)
+    return write_episode_report(run_dir)
+
+
+@app.command("report")
+def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a bench directory).")],
+           video: Annotated[bool, typer.Option("--video/--no-video", help="Also write episode.mp4 and .gif.")] = True,
+           ) -> None:
+    """Write report.html (and the episode video) for a recorded run, or the report of a bench directory."""
+    from vlnpilot.errors import ConfigError
+
+    if not run_dir.is_dir():
+        raise ConfigError(f"{run_dir} is not a directory; give a run directory (with summary.json) or a bench "
+                          "directory (with results.jsonl)")
+    if (run_dir / "results.jsonl").is_file() and not (run_dir / "summary.json").is_file():
+        from vlnpilot.report.html import write_bench_report
+
+        path = write_bench_report(run_dir)
+    else:
+        if not (run_dir / "summary.json").is_file():
+            raise ConfigError(f"{run_dir} is not a run directory: summary.json is missing")
+        path = _write_episode_report(run_dir, video=video)
+    console.print(f"wrote {escape(str(path))}")
 
 
 @app.command("serve")

@@ -23,6 +23,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, Ellipse, FancyArrow, Patch, Polygon  # noqa: E402
 
 from vlnpilot.errors import UnknownNameError  # noqa: E402
+from vlnpilot.fsm import State
 from vlnpilot.scene.model import EXTERIOR, Door, Room, Scene, Solid  # noqa: E402
 
 WALL_COLOR = "0.35"
@@ -34,8 +35,11 @@ CLOSED_DOOR_COLOR = "red"
 TARGET_COLOR = "gold"
 SPAWN_COLOR, HEADING_COLOR = "limegreen", "red"  # the paper's Figure 6: a green sphere and a red bar
 TRAJECTORY_COLOR = "0.15"
-STATE_COLORS = ("tab:blue", "tab:orange", "tab:purple", "tab:cyan", "tab:brown", "tab:pink", "tab:olive",
-                "tab:gray", "tab:green", "tab:red")
+_PALETTE = ("tab:blue", "tab:orange", "tab:purple", "tab:cyan", "tab:brown", "tab:pink", "tab:olive",
+            "tab:gray", "tab:green", "tab:red")
+# One fixed colour per FSM state, so that a state looks the same in every plan, report and video.
+STATE_COLORS: dict[str, str] = {s.value: _PALETTE[i % len(_PALETTE)] for i, s in enumerate(
+    s for s in State if s not in (State.START, State.FINAL))}
 
 XY = tuple[float, float]
 
@@ -274,7 +278,8 @@ def _draw_trajectory(ax: Axes, points: list[XY], states: Sequence[Any] | None) -
     else:
         labels = [_state_label(s) for s in states]
         order = list(dict.fromkeys(labels))
-        colors = {lab: STATE_COLORS[i % len(STATE_COLORS)] for i, lab in enumerate(order)}
+        extra = [lab for lab in order if lab not in STATE_COLORS]  # names outside the FSM keep a stable order too
+        colors = {lab: STATE_COLORS.get(lab) or _PALETTE[-1 - extra.index(lab) % len(_PALETTE)] for lab in order}
         for lab in order:
             pts = [p for p, l in zip(points, labels, strict=True) if l == lab]
             ax.scatter([p[0] for p in pts], [p[1] for p in pts], s=30, color=colors[lab], edgecolors="black",

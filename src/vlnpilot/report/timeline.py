@@ -1,0 +1,193 @@
+"""A run directory read back as a timeline for the reports: one entry per decision, plus the end.
+
+Entry k (k = 1..N) is step k as the pilot lived it: the frames it saw (the observation recorded after step
+k-1, or the start frames), the pose it decided from, its decision, what the controller executed and what
+happened. A last entry shows where the episode ended. The HTML page and the video both read this, so they
+show the same thing for the same step.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vlnpilot.record import load_run
+
+# Step-record keys of the safety layer (`vlnpilot.safety`): commands it changed, oscillation events, and the
+# feedback it puts into the next prompt. Absent in runs recorded before it existed.
+INTERVENTION_KEYS = ("interventions",)
+
+_KNOWN_KEYS = {"step", "state", "decision", "raw_text", "usage", "model", "failures", "proposed", "executed",
+               "next_state", "pose_before", "pose_after", "collided", "contact", "contact_part", "room_true",
+               "oscillation", "frames", "oscillation_event", "safety_feedback", *INTERVENTION_KEYS}
+
+
+@dataclass
+class Entry:
+    """One row of the timeline. `step` is None for the closing entry."""
+
+    index: int
+    step: int | None
+    state: str | None
+    next_state: str | None
+    decision: dict[str, Any] | None
+    proposed: str | None
+    executed: str | None
+    failures: list[dict[str, Any]]
+    usage: dict[str, Any]
+    raw_text: str | None
+    pose: dict[str, float] | None  # where the pilot decided from (the final pose for the closing entry)
+    pose_after: dict[str, float] | None
+    collided: bool
+    contact: str | None
+    room_true: str | None  # ground-truth room at `pose`, when known
+    oscillation: bool
+    interventions: list[Any]  # safety.Intervention dicts: step, source, proposed, executed, reason
+    frames: dict[str, str]  # view -> path relative to the run dir, only for frames that exist
+    oscillation_event: dict[str, Any] | None = None  # safety.OscillationEvent dict
+    feedback: list[str] = field(default_factory=list)  # what the controller tells the pilot in the next prompt
+    extra: dict[str, Any] = field(default_factory=dict)  # unknown keys of the record, shown raw
+
+    @property
+    def label(self) -> str:
+        return f"Step {self.step}" if self.step is not None else "End"
+
+    @property
+    def shown_state(self) -> str:
+        """The state that colours this entry: the state it decided in (the final state for the closing entry)."""
+        return self.state or "?"
+
+
+@dataclass
+class Episode:
+    run_dir: Path
+    summary: dict[str, Any]
+    steps: list[dict[str, Any]]
+    entries: list[Entry]
+    scene: Any | None  # vlnpilot.scene.Scene when the scene could be loaded
+
+    @property
+    def result(self) -> dict[str, Any]:
+        return self.summary.get("result") or {}
+
+    @property
+    def task(self) -> dict[str, Any]:
+        return self.summary.get("task") or {}
+
+    def trajectory(self) -> list[dict[str, float]]:
+        """Start pose and the pose after every step."""
+        pts = [self.summary["start_pose"]] if self.summary.get("start_pose") else []
+        if not pts and self.steps and self.steps[0].get("pose_before"):
+            pts = [self.steps[0]["pose_before"]]
+        pts += [s["pose_after"] for s in self.steps if s.get("pose_after")]
+        return pts
+
+    def trajectory_states(self) -> list[str]:
+        """One state per trajectory point: the state the pilot chose on arriving there (the start state first)."""
+        first = (self.steps[0].get("state") if self.steps else None) or "Recognize Room"
+        out = [first]
+        for s in self.steps:
+            if s.get("pose_after"):
+                out.append(s.get("next_state") or s.get("state") or "?")
+        return out[: len(self.trajectory())]
+
+    def collision_point(self) -> dict[str, float] | None:
+        for s in self.steps:
+            if s.get("collided"):
+                return s.get("pose_after") or s.get("pose_before")
+        return None
+
+
+def _existing(run_dir: Path, frames: dict[str, str] | None) -> dict[str, str]:
+    out = {}
+    for view, rel in (frames or {}).items():
+        if isinstance(rel, str) and (run_dir / rel).is_file():
+            out[view] = rel
+    return out
+
+
+def _interventions(record: dict[str, Any]) -> list[Any]:
+    out: list[Any] = []
+    for key in INTERVENTION_KEYS:
+        value = record.get(key)
+        if value in (None, False, [], {}):
+            continue
+        out.extend(value if isinstance(value, list) else [value])
+    return out
+
+
+def _room_at(scene: Any, pose: dict[str, float] | None) -> str | None:
+    if scene is None or not pose:
+        return None
+    try:
+        return scene.room_at(pose["x"], pose["y"])
+    except (KeyError, TypeError):
+        return None
+
+
+@functools.lru_cache(maxsize=8)
+def load_scene_or_none(name: str | None) -> Any | None:
+    """The scene a run flew in, or None when it is not a built-in scene (the report then omits the plan).
+
+    Cached: scenes are immutable, and a benchmark report reads hundreds of runs of the same scene.
+    """
+    if not name:
+        return None
+    from vlnpilot.errors import VLNPilotError
+    from vlnpilot.scene import load_scene
+
+    try:
+        return load_scene(name)
+    except (VLNPilotError, KeyError, ValueError):
+        return None
+
+
+def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
+    """Read a run directory into an `Episode` with its timeline (scene loaded by name unless given)."""
+    run_dir = Path(run_dir)
+    summary, steps = load_run(run_dir)
+    if scene is None:
+        scene = load_scene_or_none(summary.get("scene"))
+    prev_frames = summary.get("start_frames") or {"front": "frames/front_000.jpg", "rear": "frames/rear_000.jpg"}
+    prev_room = None
+    entries: list[Entry] = []
+    for i, rec in enumerate(steps):
+        pose = rec.get("pose_before")
+        room = _room_at(scene, pose) or prev_room
+        entries.append(Entry(
+            index=i, step=rec.get("step", i + 1), state=rec.get("state"), next_state=rec.get("next_state"),
+            decision=rec.get("decision"), proposed=rec.get("proposed"), executed=rec.get("executed"),
+            failures=list(rec.get("failures") or []), usage=dict(rec.get("usage") or {}),
+            raw_text=rec.get("raw_text"), pose=pose, pose_after=rec.get("pose_after"),
+            collided=bool(rec.get("collided")), contact=rec.get("contact"), room_true=room,
+            oscillation=bool(rec.get("oscillation")), interventions=_interventions(rec),
+            frames=_existing(run_dir, prev_frames),
+            oscillation_event=rec.get("oscillation_event") or None,
+            feedback=[str(f) for f in rec.get("safety_feedback") or []],
+            extra={k: v for k, v in rec.items() if k not in _KNOWN_KEYS},
+        ))
+        prev_frames = rec.get("frames") or {}
+        prev_room = rec.get("room_true")
+    end_pose = summary.get("end_pose") or (steps[-1].get("pose_after") if steps else summary.get("start_pose"))
+    result = summary.get("result") or {}
+    last = steps[-1] if steps else {}
+    final_state = result.get("final_state") or last.get("next_state") or last.get("state")
+    entries.append(Entry(
+        index=len(steps), step=None, state=final_state, next_state=None, decision=None, proposed=None,
+        executed=None, failures=[], usage={}, raw_text=None, pose=end_pose, pose_after=None,
+        collided=bool(last.get("collided")), contact=last.get("contact"),
+        room_true=_room_at(scene, end_pose) or result.get("final_room") or last.get("room_true"),
+        oscillation=False, interventions=[], frames=_existing(run_dir, prev_frames),
+    ))
+    return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene)
+
+
+def yaw_of(pose: dict[str, float] | None) -> float:
+    return float(pose.get("yaw_deg", 0.0)) if pose else 0.0
+
+
+def finite(value: Any) -> bool:
+    return isinstance(value, int | float) and math.isfinite(value)
