@@ -95,6 +95,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
+        shield: Annotated[str, typer.Option("--shield", help="Safety shield: off, geometry or depth.")] = "geometry",
+        overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
         ) -> None:
     """Fly one episode on the embedded simulator, record it and write its report."""
     from vlnpilot.episode import EpisodeConfig, run_episode
@@ -108,7 +110,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
     task = parse_query(query, sc)
-    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile)
+    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
@@ -122,6 +124,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         d = rec["decision"] or {}  # model text is untrusted: escape it before Rich reads markup in it
         fail = f" [red]({len(rec['failures'])} rejected)[/red]" if rec["failures"] else ""
         hit = f" [bold red]COLLISION with {escape(str(rec['contact']))}[/bold red]" if rec["collided"] else ""
+        if rec.get("interventions"):
+            hit += f" [yellow](safety: {escape(str(rec['proposed']))} -> {escape(str(rec['executed']))})[/yellow]"
         console.print(f"[dim]{rec['step']:>3}[/dim] {rec['state']:<27} [bold]{rec['executed'] or '-':<2}[/bold] "
                       f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)

@@ -4,6 +4,10 @@ Each step: observe, ask the pilot, validate the decision against the FSM (is the
 state? is the transition allowed?), execute, update the FSM, check termination. An invalid decision is
 never executed: the pilot is re-asked with the validation error (at most `max_reasks` times), then the
 drone hovers (E) and the step counts an invalid decision.
+
+Between the validated decision and the drone sits the safety layer (`vlnpilot.safety`, `EpisodeConfig.shield`):
+an oscillation guard, a door-crossing assist and a shield may change the command (and, when the guard commits to
+a crossing, the next state); each change is recorded and told to the pilot in the next prompt's feedback.
 """
 
 from __future__ import annotations
@@ -20,6 +24,15 @@ from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
 from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
 from vlnpilot.record import Recorder, git_sha, package_versions
+from vlnpilot.safety import (
+    OVERLAYS,
+    SHIELDS,
+    SafetyConfig,
+    SafetyLayer,
+    SafetyVerdict,
+    draw_corridor,
+    make_safety,
+)
 from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge, shortest_path_length, spl
 from vlnpilot.types import GroundTruth, Observation
@@ -35,6 +48,9 @@ class EpisodeConfig:
     max_failed_steps: int = 3  # consecutive steps without a valid decision before `pilot_error`
     success: SuccessConfig = field(default_factory=SuccessConfig)
     seed: int | None = None
+    shield: str = "off"  # off | geometry | depth (the CLI defaults to safety.DEFAULT_SHIELD in the simulator)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)  # margin, door assist, oscillation guard, depth
+    overlay: str | None = None  # None | "corridor": draw the propeller-tip corridor on the image the pilot sees
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_steps, int) or self.max_steps < 1:
@@ -43,6 +59,10 @@ class EpisodeConfig:
             raise ConfigError(f"unknown FSM profile {self.profile!r}; valid profiles: {', '.join(PROFILES)}")
         if self.max_reasks < 0:
             raise ConfigError("max_reasks must be >= 0")
+        if str(self.shield).lower() not in SHIELDS:
+            raise ConfigError(f"unknown shield {self.shield!r}; valid shields: {', '.join(SHIELDS)}")
+        if self.overlay is not None and self.overlay not in OVERLAYS:
+            raise ConfigError(f"unknown overlay {self.overlay!r}; valid overlays: {', '.join(OVERLAYS)}")
 
 
 @dataclass(frozen=True)
@@ -66,6 +86,9 @@ class EpisodeResult:
     latency_s_total: float
     pilot_calls: int
     wall_time_s: float
+    interventions: int = 0  # commands changed by the safety layer (guard, door assist, shield)
+    oscillation_events: int = 0  # oscillation stretches the guard detected (also with the shield off)
+    shield: str = "off"
 
     @property
     def success(self) -> bool:
@@ -87,16 +110,36 @@ def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
     return gt
 
 
-def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> tuple[Decision | None, str | None, bool]:
-    """One pilot call, parsed and validated: (decision, error reason, fatal)."""
+@dataclass(frozen=True)
+class _Answer:
+    """One pilot call, parsed and validated. A rejected reply keeps its text and the tokens it cost."""
+
+    decision: Decision | None
+    error: str | None = None
+    fatal: bool = False
+    usage: Usage = field(default_factory=Usage)
+    raw_text: str | None = None
+    kind: str | None = None  # the pilot's short reason code (refusal, truncated, invalid_enum, ...)
+    hint: str | None = None  # the pilot's own one-line advice for the re-ask, if it has one
+
+
+def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> _Answer:
     try:
         decision = normalize_decision(pilot.decide(pin))
     except PilotError as exc:
-        return None, f"{exc.reason}: {exc}", exc.fatal
+        return _Answer(None, f"{exc.reason}: {exc}", exc.fatal, getattr(exc, "usage", None) or Usage(),
+                       getattr(exc, "raw_text", None), exc.reason, getattr(exc, "feedback", None))
     except DecisionError as exc:
-        return None, f"malformed answer: {exc}", False
+        return _Answer(None, f"malformed answer: {exc}", raw_text=exc.raw_text, kind="malformed")
     error = validate_decision(decision, state, profile)
-    return decision, error, False
+    return _Answer(decision, error, usage=decision.usage, raw_text=decision.raw_text,
+                   kind="invalid_decision" if error else None)
+
+
+def _reseed(pilot: Pilot, seed: int | None) -> None:
+    """Give a stochastic pilot the episode's seed (pilots with a `reseed(seed)` method, e.g. noisy-oracle)."""
+    if seed is not None and callable(getattr(pilot, "reseed", None)):
+        pilot.reseed(seed)
 
 
 def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
@@ -107,7 +150,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     t_start = time.perf_counter()
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
+    _reseed(pilot, config.seed)
     scene = env.scene
+    safety: SafetyLayer = make_safety(config.shield, env, scene, config.safety)
+    safety.reset(obs)
+    notes: tuple[str, ...] = ()  # safety feedback for the next prompt
     spawn_id = spawn.id if isinstance(spawn, Spawn) else spawn
     topo = scene.topological_map()
     shortest = shortest_path_length(scene, obs.pose, task, config.success)
@@ -125,7 +172,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
-                       "seed": config.seed, "success": asdict(config.success)},
+                       "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
+                       "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
@@ -134,29 +182,31 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     steps = 0
     for step in range(1, config.max_steps + 1):
         steps = step
-        feedback: list[str] = []
+        feedback: list[str] = list(notes)
         failures: list[dict[str, Any]] = []
         decision: Decision | None = None
         fatal = False
+        image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
         for attempt in range(1 + config.max_reasks):
-            pin = PilotInput(image=obs.front_rgb, query=task.query, topological_map=topo, state=state,
+            pin = PilotInput(image=image, query=task.query, topological_map=topo, state=state,
                              previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback))
-            candidate, error, fatal = _ask(pilot, pin, state, config.profile)
+            answer = _ask(pilot, pin, state, config.profile)
             calls += 1
-            if candidate is not None:
-                usage = usage + candidate.usage
-            if error is None:
-                decision = candidate
+            usage = usage + answer.usage
+            fatal = answer.fatal
+            if answer.error is None:
+                decision = answer.decision
                 break
-            failures.append({"attempt": attempt, "reason": error,
-                             "raw_text": candidate.raw_text if candidate is not None else None})
+            failures.append({"attempt": attempt, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
+                             "raw_text": answer.raw_text})
             if fatal:
                 break
-            feedback = [f"Your previous answer was rejected: {error}. Answer again with valid values."]
+            why = answer.hint or f"{answer.error}. Answer again with valid values."
+            feedback = [*notes, f"Your previous answer was rejected: {why}"]
 
         if fatal:
             outcome, reason = "pilot_error", failures[-1]["reason"]
-            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs, None, None)
+            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs, None, None, None)
             break
 
         pose_before = obs.pose
@@ -167,12 +217,15 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         else:
             failed_streak = 0
             command, next_state = get_command(decision.movement), parse_state(decision.state)
+        verdict = safety.filter(step, state, command, next_state, pose_before)
+        command, next_state, notes = verdict.command, verdict.next_state, verdict.feedback
         obs = env.step(command)
+        safety.observe(obs)
         path.update(pose_before, obs.pose)
         reversal = osc.update(command)
         room_now = gt.room() if gt is not None else None
         _record(recorder, on_step, step, state, decision, failures, command, next_state, obs, pose_before,
-                room_now, reversal)
+                room_now, reversal, verdict)
         previous = command.code
 
         if obs.collided:
@@ -198,17 +251,21 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         final_state=state.value, final_room=final_room, contact=contact,
         input_tokens=usage.input_tokens, cached_tokens=usage.cached_tokens, output_tokens=usage.output_tokens,
         cost_usd=round(usage.cost_usd, 6), latency_s_total=round(usage.latency_s, 4), pilot_calls=calls,
-        wall_time_s=round(time.perf_counter() - t_start, 3),
+        wall_time_s=round(time.perf_counter() - t_start, 3), interventions=len(safety.interventions),
+        oscillation_events=len(safety.events), shield=safety.name,
     )
     if recorder is not None:
-        recorder.finish({"result": result.to_dict(), "end_pose": obs.pose.as_dict()})
+        recorder.finish({"result": result.to_dict(), "end_pose": obs.pose.as_dict(),
+                         "safety": {"shield": safety.name,
+                                    "interventions": [i.to_dict() for i in safety.interventions],
+                                    "oscillation_events": [e.to_dict() for e in safety.events]}})
     return result
 
 
 def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,
             decision: Decision | None, failures: list[dict[str, Any]], command: Command | None,
             next_state: State | None, obs: Observation, pose_before_obs: Any, room_now: str | None,
-            reversal: bool | None) -> None:
+            reversal: bool | None, verdict: SafetyVerdict | None = None) -> None:
     pose_before = pose_before_obs.pose if isinstance(pose_before_obs, Observation) else pose_before_obs
     record: dict[str, Any] = {
         "step": step,
@@ -228,6 +285,9 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
         "contact_part": obs.contact_part,
         "room_true": room_now,
         "oscillation": bool(reversal),
+        "interventions": [i.to_dict() for i in verdict.interventions] if verdict else [],
+        "oscillation_event": verdict.oscillation.to_dict() if verdict and verdict.oscillation else None,
+        "safety_feedback": list(verdict.feedback) if verdict else [],
     }
     if recorder is not None:
         record["frames"] = recorder.save_observation(step, obs.front_rgb, obs.rear_rgb)
