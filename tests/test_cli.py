@@ -44,7 +44,8 @@ def test_run_with_the_default_oracle_succeeds_and_prints_the_run_dir(runner: Cli
     assert lines[0].startswith("pilot: oracle (no OPENAI_API_KEY")  # which pilot, and why
     assert any("Recognize Room" in line for line in lines)  # live progress: step, state, move, room
     assert "success in" in result.stdout
-    assert lines[-1] == f"run directory: {out}"
+    assert lines[-1] == f"run directory: {out}  (report: {out / 'report.html'})"
+    assert (out / "report.html").is_file() and (out / "episode.mp4").is_file()
     summary, steps = load_run(out)
     assert summary["status"] == "finished" and summary["result"]["outcome"] == "success"
     assert summary["pilot"] == "oracle" and len(steps) == summary["result"]["steps"]

@@ -178,6 +178,35 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
     console.print(f"wrote {escape(str(path))}")
 
 
+@app.command("bench")
+def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite YAML file.")] = "paper",
+          pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
+          reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
+          max_steps: Annotated[int | None, typer.Option("--max-steps", min=1)] = None,
+          workers: Annotated[int | None, typer.Option("--workers", min=1, help="Episodes in flight.")] = None,
+          executor: Annotated[str, typer.Option("--executor", help="local or ray.")] = "local",
+          ray_address: Annotated[str | None, typer.Option("--ray-address")] = None,
+          out: OutOpt = None,
+          resume: Annotated[bool, typer.Option("--resume", help="Run only the episodes missing in --out.")] = False,
+          seed: Annotated[int | None, typer.Option("--seed", help="Base seed of the repetitions.")] = None,
+          profile: Annotated[str | None, typer.Option("--profile", help="FSM profile: paper or fast.")] = None,
+          base_url: Annotated[str | None, typer.Option("--base-url")] = None,
+          shield: Annotated[str, typer.Option("--shield", help="off, geometry or depth.")] = "geometry",
+          overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
+          report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True) -> None:
+    """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report."""
+    from vlnpilot.bench.command import bench_command
+
+    options = {"overlay": overlay} if overlay else {}
+    bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
+                              executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
+                              profile=profile, base_url=base_url, shield=shield, episode_options=options)
+    if report:
+        from vlnpilot.report.html import write_bench_report
+
+        console.print(f"report: {escape(str(write_bench_report(bench_dir)))}")
+
+
 @app.command("serve")
 def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
           port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8000,

@@ -139,14 +139,20 @@ def parse_spec(spec: str) -> tuple[str, str | None]:
     return name.strip().lower(), (model.strip() or None)
 
 
-def make_pilot(spec: str, **options: Any) -> Pilot:
-    """Build a pilot from a SPEC (`name` or `name:model`); a bad name lists the known ones."""
-    name, model = parse_spec(spec)
+def pilot_factory(name: str) -> PilotFactory:
+    """The registered factory of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
     _load_builtin_pilots(only=name)
     if name not in _REGISTRY:
         _load_builtin_pilots()
     if name not in _REGISTRY:
         raise UnknownNameError("pilot", name, _REGISTRY)
+    return _REGISTRY[name]
+
+
+def make_pilot(spec: str, **options: Any) -> Pilot:
+    """Build a pilot from a SPEC (`name` or `name:model`); a bad name lists the known ones."""
+    name, model = parse_spec(spec)
+    factory = pilot_factory(name)
     if model is not None:
         options["model"] = model
-    return _REGISTRY[name](**options)
+    return factory(**options)

@@ -1,0 +1,73 @@
+"""`vln-pilot bench` as a plain function: the CLI only parses options and calls `bench_command`."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from vlnpilot.bench.executors import BenchError
+from vlnpilot.bench.runner import BenchReport, BenchSettings, parse_pilots, run_bench
+
+
+def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "oracle", reps: int | None = None,
+                  max_steps: int | None = None, workers: int | None = None, executor: str = "local",
+                  ray_address: str | None = None, out: str | Path | None = None, resume: bool = False,
+                  seed: int | None = None, profile: str | None = None, base_url: str | None = None,
+                  progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
+                  render: bool = True,
+                  plugins: Sequence[str] = (), console: Any = None) -> Path:
+    """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
+
+    `suite`: 'paper' or a YAML file. `pilots`: 'oracle,openai:gpt-4.1' or a list. reps / max_steps / seed /
+    profile override the suite's. `workers`: episodes in flight (default: the number of cores; go above it
+    for model pilots). `executor`: local | ray | inline. `shield`: off | geometry | depth (None: off, the
+    paper's behaviour). `episode_options`: further EpisodeConfig fields (e.g. {'overlay': 'corridor'}); all of
+    them enter the config hash. Raises BenchError (a VLNPilotError) when episodes
+    failed, after recording every finished one: rerun with resume=True to fly only the missing ones.
+    """
+    if console is None:
+        from rich.console import Console
+
+        console = Console(stderr=True)
+    if out is None:
+        from vlnpilot.record import default_run_dir
+
+        if resume:
+            raise BenchError("--resume needs --out: the bench directory to resume")
+        out = default_run_dir("runs", f"bench-{Path(str(suite)).stem}")
+    settings = BenchSettings(
+        suite=suite, pilots=parse_pilots(pilots), out=out, reps=reps, max_steps=max_steps, seed=seed,
+        profile=profile, base_url=base_url, executor=executor,
+        episode_options={"shield": str(shield or "off").lower(), **(episode_options or {})},
+        workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render,
+        plugins=tuple(plugins), progress=progress)
+    try:
+        report = run_bench(settings, console=console)
+    except KeyboardInterrupt:
+        console.print(f"interrupted: finished episodes are kept in {out}/results.jsonl; continue with "
+                      f"--resume --out {out}", highlight=False)
+        raise
+    print_report(report, console)
+    if report.failed:
+        keys = sorted(report.failed)
+        shown = "\n  ".join(f"{k}: {report.failed[k].strip().splitlines()[0] if report.failed[k].strip() else '?'}"
+                            for k in keys[:5])
+        more = f"\n  ... and {len(keys) - 5} more" if len(keys) > 5 else ""
+        raise BenchError(f"{len(keys)} episode(s) did not finish:\n  {shown}{more}\n"
+                         f"every finished episode is recorded; rerun with --resume --out {report.out} to fly the rest")
+    return report.out
+
+
+def print_report(report: BenchReport, console: Any) -> None:
+    for s in report.summaries:
+        lat = f", latency p50 {s.latency_p50_s:.3f} s p95 {s.latency_p95_s:.3f} s" if s.latency_p50_s is not None \
+            else ""
+        console.print(
+            f"[bold]{s.pilot}[/bold]: {s.successes}/{s.episodes} successes ({100 * s.success_rate:.1f}%, 95% CI "
+            f"{100 * s.ci_low:.1f}-{100 * s.ci_high:.1f}%), SPL {s.spl:.3f}, {s.collisions} collisions, "
+            f"{s.steps_exceeded} step limits, {s.false_successes} false successes, tokens "
+            f"{s.input_tokens}/{s.output_tokens}, cost ${s.cost_usd:.4f}{lat}", highlight=False)
+    state = "complete" if report.complete else f"{report.finished}/{report.episodes} episodes"
+    console.print(f"bench {state} in {report.wall_s:.1f} s ({report.ran} run now); tables: "
+                  + ", ".join(str(p) for p in report.tables[:3]), highlight=False)

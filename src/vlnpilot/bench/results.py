@@ -1,0 +1,210 @@
+"""results.jsonl (one line per finished episode) and the statistics the tables print.
+
+The log is append-only: the parent writes each line when its episode ends, then flushes and fsyncs it, so a
+bench killed at any moment loses at most the line being written. Reading skips a torn last line and keeps the
+first line of any key seen twice; `ResultsLog.open_for_append` cuts a torn tail off before appending.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+RESULTS = "results.jsonl"
+Z95 = 1.959963984540054  # two-sided 95% normal quantile
+
+Key = tuple[str, str, int]  # (pilot spec, row id, repetition)
+
+
+def episode_key(pilot: str, row: str, rep: int) -> str:
+    """The printable key of an episode: 'pilot|row|rep'."""
+    return f"{pilot}|{row}|{rep}"
+
+
+def record_key(record: dict[str, Any]) -> Key:
+    return str(record["pilot"]), str(record["row"]), int(record["rep"])
+
+
+class ResultsLog:
+    """The append-only results file of a bench directory."""
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self._fh: Any = None
+
+    def read(self) -> list[dict[str, Any]]:
+        """Every complete record, first occurrence per key, in file order (torn or foreign lines skipped)."""
+        if not self.path.is_file():
+            return []
+        out: list[dict[str, Any]] = []
+        seen: set[Key] = set()
+        with open(self.path, "rb") as fh:
+            for raw in fh:
+                if not raw.endswith(b"\n"):  # torn last line: the writer died mid-write
+                    break
+                try:
+                    record = json.loads(raw)
+                    key = record_key(record)
+                except (ValueError, KeyError, TypeError):
+                    continue
+                if key not in seen:
+                    seen.add(key)
+                    out.append(record)
+        return out
+
+    def repair(self) -> int:
+        """Cut an unterminated last line off (left by a kill mid-write); returns the bytes removed."""
+        if not self.path.is_file():
+            return 0
+        with open(self.path, "rb+") as fh:
+            size = fh.seek(0, os.SEEK_END)
+            if size == 0:
+                return 0
+            pos, chunk = size, 4096
+            while pos > 0:
+                start = max(0, pos - chunk)
+                fh.seek(start)
+                data = fh.read(pos - start)
+                nl = data.rfind(b"\n")
+                if nl >= 0:
+                    keep = start + nl + 1
+                    break
+                pos = start
+            else:
+                keep = 0
+            if keep < size:
+                fh.truncate(keep)
+                fh.flush()
+                os.fsync(fh.fileno())
+            return size - keep
+
+    def append(self, record: dict[str, Any]) -> None:
+        """Write one record as one line, then flush and fsync: it survives a kill or a power cut."""
+        if self._fh is None:
+            self.repair()
+            self._fh = open(self.path, "a", encoding="utf-8")  # noqa: SIM115 - closed in close()
+        self._fh.write(json.dumps(record, separators=(",", ":"), allow_nan=False) + "\n")
+        self._fh.flush()
+        os.fsync(self._fh.fileno())
+
+    def close(self) -> None:
+        if self._fh is not None:
+            self._fh.close()
+            self._fh = None
+
+    def __enter__(self) -> ResultsLog:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# ----------------------------------------------------------------------------------------------- statistics
+def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, float]:
+    """Wilson score interval of a binomial proportion (95% by default); (0, 1) when n is 0."""
+    if n <= 0:
+        return 0.0, 1.0
+    if not 0 <= successes <= n:
+        raise ValueError(f"successes must be in 0..{n}, got {successes}")
+    p = successes / n
+    z2 = z * z
+    denom = 1 + z2 / n
+    center = (p + z2 / (2 * n)) / denom
+    half = z / denom * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
+    return max(0.0, center - half), min(1.0, center + half)
+
+
+def percentile(values: Sequence[float], q: float) -> float | None:
+    """The q-th percentile (0..100) with linear interpolation between order statistics (numpy's default)."""
+    if not values:
+        return None
+    xs = sorted(values)
+    pos = (len(xs) - 1) * q / 100.0
+    lo = math.floor(pos)
+    hi = min(lo + 1, len(xs) - 1)
+    return xs[lo] + (xs[hi] - xs[lo]) * (pos - lo)
+
+
+@dataclass(frozen=True)
+class CellStats:
+    """One (row, pilot) cell of the paper's table."""
+
+    episodes: int
+    successes: int
+    collisions: int
+    steps_exceeded: int
+
+
+@dataclass(frozen=True)
+class PilotSummary:
+    """The per-pilot summary under the table."""
+
+    pilot: str
+    models: tuple[str, ...]
+    episodes: int
+    successes: int
+    ci_low: float
+    ci_high: float
+    spl: float
+    mean_steps: float
+    collisions: int
+    steps_exceeded: int
+    false_successes: int
+    pilot_errors: int
+    invalid_decisions: int
+    oscillations: int
+    interventions: int  # commands changed by the safety layer (0 with the shield off)
+    input_tokens: int
+    output_tokens: int
+    cost_usd: float
+    pilot_calls: int
+    latency_p50_s: float | None
+    latency_p95_s: float | None
+
+    @property
+    def success_rate(self) -> float:
+        return self.successes / self.episodes if self.episodes else 0.0
+
+
+def cell_stats(records: Iterable[dict[str, Any]]) -> CellStats:
+    outcomes = [r["result"]["outcome"] for r in records]
+    return CellStats(episodes=len(outcomes), successes=outcomes.count("success"),
+                     collisions=outcomes.count("collision"), steps_exceeded=outcomes.count("max_steps"))
+
+
+def call_latencies(record: dict[str, Any]) -> list[float]:
+    """Per-call pilot latencies of an episode (the worker's timings; else the mean from the episode totals)."""
+    lat = record.get("call_latencies_s")
+    if lat is not None:
+        return [float(x) for x in lat]
+    res = record["result"]
+    calls = int(res.get("pilot_calls") or 0)
+    return [float(res.get("latency_s_total") or 0.0) / calls] * calls if calls else []
+
+
+def summarize(pilot: str, records: Sequence[dict[str, Any]]) -> PilotSummary:
+    """Aggregate one pilot's episodes: SPL is the mean of the per-episode SPL (Anderson et al. 2018)."""
+    res = [r["result"] for r in records]
+    n = len(res)
+    outcomes = [x["outcome"] for x in res]
+    k = outcomes.count("success")
+    lo, hi = wilson_interval(k, n)
+    lat = [x for r in records for x in call_latencies(r)]
+    return PilotSummary(
+        pilot=pilot, models=tuple(sorted({str(r.get("model")) for r in records})), episodes=n, successes=k,
+        ci_low=lo, ci_high=hi, spl=(sum(float(x["spl"]) for x in res) / n) if n else 0.0,
+        mean_steps=(sum(int(x["steps"]) for x in res) / n) if n else 0.0,
+        collisions=sum(int(x["collisions"]) for x in res), steps_exceeded=outcomes.count("max_steps"),
+        false_successes=outcomes.count("false_success"), pilot_errors=outcomes.count("pilot_error"),
+        invalid_decisions=sum(int(x["invalid_decisions"]) for x in res),
+        oscillations=sum(int(x["oscillations"]) for x in res),
+        interventions=sum(int(x.get("interventions") or 0) for x in res),
+        input_tokens=sum(int(x["input_tokens"]) for x in res), output_tokens=sum(int(x["output_tokens"]) for x in res),
+        cost_usd=sum(float(x["cost_usd"]) for x in res), pilot_calls=sum(int(x["pilot_calls"]) for x in res),
+        latency_p50_s=percentile(lat, 50), latency_p95_s=percentile(lat, 95),
+    )

@@ -1,0 +1,270 @@
+"""Benchmark suites: YAML files of (spawn, query, goal) rows, validated against the scene before anything runs.
+
+    name: paper                   # optional; defaults to the file name
+    scene: cabin
+    repetitions: 5
+    max_steps: 50
+    seed: 0                       # base of the per-repetition seeds (see `episode_seed`)
+    profile: paper                # FSM profile
+    spawn_jitter: {m: 0.0, deg: 0.0}   # optional seeded spawn offsets (0: every repetition starts alike)
+    spawn_labels: {living_room: Living Room and Kitchen}   # optional display names of starting rooms
+    rows:
+      - {id: living-bathroom, spawn: living_room, query: Go to the bathroom, goal: {room: bathroom}}
+
+`goal` is optional: the query is always parsed with `tasks.parse_query`, and a goal given in the row must agree
+with it (so a parser change can never silently change what a suite measures). `goal: bathroom` is short for
+`goal: {room: bathroom}`. The built-in `paper` suite is the paper's Table 4.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.fsm import PROFILES
+from vlnpilot.scene import SCENES, Scene, load_scene
+from vlnpilot.tasks import Task, parse_query
+
+_TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
+             "spawn_labels", "rows")
+_ROW_KEYS = ("id", "spawn", "query", "goal")
+_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
+
+
+class SuiteError(ConfigError):
+    """A suite that cannot run; the message names the file, every bad row and the valid choices."""
+
+
+def builtin_suites() -> list[str]:
+    """Names of the suites shipped with the package (`paper`, ...)."""
+    root = resources.files("vlnpilot.bench") / "suites"
+    return sorted(p.name.removesuffix(".yaml") for p in root.iterdir() if p.name.endswith(".yaml"))
+
+
+@dataclass(frozen=True)
+class SuiteRow:
+    id: str
+    spawn: str
+    query: str
+    goal_room: str
+    goal_target: str | None = None
+
+    @property
+    def task(self) -> Task:
+        return Task(query=self.query, goal_room=self.goal_room, goal_target=self.goal_target)
+
+    def canonical(self) -> dict[str, Any]:
+        return {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
+                "goal_target": self.goal_target}
+
+
+@dataclass(frozen=True)
+class Suite:
+    name: str
+    rows: tuple[SuiteRow, ...]
+    scene: str = "cabin"
+    repetitions: int = 5
+    max_steps: int = 50
+    seed: int = 0
+    profile: str = "paper"
+    spawn_jitter_m: float = 0.0
+    spawn_jitter_deg: float = 0.0
+    spawn_labels: dict[str, str] = field(default_factory=dict)
+    description: str = ""
+    source: str = ""  # 'builtin:paper' or the file path, for the manifest
+
+    def row(self, row_id: str) -> SuiteRow:
+        for r in self.rows:
+            if r.id == row_id:
+                return r
+        raise SuiteError(f"suite {self.name!r} has no row {row_id!r}; rows: {', '.join(r.id for r in self.rows)}")
+
+    def spawn_label(self, spawn: str) -> str:
+        """How the tables name a starting room: the suite's label, else the scene room's name in title case."""
+        if spawn in self.spawn_labels:
+            return self.spawn_labels[spawn]
+        scene = load_scene(self.scene)
+        room = scene.spawn(spawn).room
+        return scene.room(room).name.title()
+
+    def canonical(self) -> dict[str, Any]:
+        """What the suite measures (no names, descriptions or labels): the part that enters the config hash."""
+        return {"scene": self.scene, "profile": self.profile, "spawn_jitter_m": self.spawn_jitter_m,
+                "spawn_jitter_deg": self.spawn_jitter_deg, "rows": [r.canonical() for r in self.rows]}
+
+    def to_dict(self) -> dict[str, Any]:
+        """The whole suite as plain data (YAML-able; `suite_from_dict` reads it back)."""
+        return {"name": self.name, "description": self.description, "scene": self.scene,
+                "repetitions": self.repetitions, "max_steps": self.max_steps, "seed": self.seed,
+                "profile": self.profile, "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
+                "spawn_labels": dict(self.spawn_labels),
+                "rows": [{"id": r.id, "spawn": r.spawn, "query": r.query,
+                          "goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}}
+                         for r in self.rows]}
+
+    def dump(self) -> str:
+        return yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
+
+
+def episode_seed(base: int, row_id: str, rep: int) -> int:
+    """The seed of one repetition: a stable hash of (base seed, row id, repetition), in [0, 2**31).
+
+    It does not depend on the pilot, so every pilot flies repetition r of a row from the same seed.
+    """
+    digest = hashlib.sha256(f"{int(base)}/{row_id}/{int(rep)}".encode()).digest()
+    return int.from_bytes(digest[:4], "big") & 0x7FFFFFFF
+
+
+def load_suite(suite: str | Path) -> Suite:
+    """A built-in suite by name (`paper`) or a YAML file; refused with every problem listed if it is invalid."""
+    text, source, default_name = _read(suite)
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise SuiteError(f"suite {source}: not valid YAML: {exc}") from None
+    return suite_from_dict(data, source=source, default_name=default_name)
+
+
+def _read(suite: str | Path) -> tuple[str, str, str]:
+    name = str(suite)
+    if isinstance(suite, str) and name in builtin_suites():
+        text = (resources.files("vlnpilot.bench") / "suites" / f"{name}.yaml").read_text(encoding="utf-8")
+        return text, f"builtin:{name}", name
+    path = Path(suite).expanduser()
+    if path.is_file():
+        try:
+            return path.read_text(encoding="utf-8"), str(path), path.stem
+        except (OSError, UnicodeDecodeError) as exc:
+            raise SuiteError(f"cannot read suite file {path}: {exc}") from None
+    raise SuiteError(f"unknown suite {name!r}: not a built-in suite ({', '.join(builtin_suites())}) "
+                     f"and no such file")
+
+
+def _int(value: Any, what: str, errors: list[str], minimum: int | None = None) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
+        bound = f" >= {minimum}" if minimum is not None else ""
+        errors.append(f"{what} must be an integer{bound}, got {value!r}")
+        return minimum or 0
+    return value
+
+
+def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "suite") -> Suite:
+    """Validate plain data (a parsed YAML document) into a Suite; a SuiteError lists every problem found."""
+    if not isinstance(data, dict):
+        raise SuiteError(f"suite {source}: expected a mapping with a 'rows' list, got {type(data).__name__}")
+    errors: list[str] = []
+    unknown = sorted(set(data) - set(_TOP_KEYS))
+    if unknown:
+        errors.append(f"unknown key(s) {', '.join(map(repr, unknown))}; valid keys: {', '.join(_TOP_KEYS)}")
+    scene_name = str(data.get("scene", "cabin"))
+    if scene_name.strip().lower() not in SCENES:
+        raise SuiteError(f"suite {source}: unknown scene {scene_name!r}; valid scenes: {', '.join(sorted(SCENES))}")
+    scene = load_scene(scene_name)
+    reps = _int(data.get("repetitions", 5), "repetitions", errors, 1)
+    max_steps = _int(data.get("max_steps", 50), "max_steps", errors, 1)
+    seed = _int(data.get("seed", 0), "seed", errors)
+    profile = str(data.get("profile", "paper"))
+    if profile not in PROFILES:
+        errors.append(f"unknown profile {profile!r}; valid profiles: {', '.join(PROFILES)}")
+    jitter = data.get("spawn_jitter") or {}
+    jm = jd = 0.0
+    if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
+        errors.append(f"spawn_jitter must be a mapping with keys m and deg, got {jitter!r}")
+    else:
+        try:
+            jm, jd = float(jitter.get("m", 0.0)), float(jitter.get("deg", 0.0))
+            if jm < 0 or jd < 0:
+                raise ValueError
+        except (TypeError, ValueError):
+            errors.append(f"spawn_jitter values must be non-negative numbers, got {jitter!r}")
+    labels = data.get("spawn_labels") or {}
+    valid_spawns = [s.id for s in scene.spawns]
+    if not isinstance(labels, dict):
+        errors.append(f"spawn_labels must map spawn names to labels, got {labels!r}")
+        labels = {}
+    for spawn in labels:
+        if spawn not in valid_spawns:
+            errors.append(f"spawn_labels: unknown spawn {spawn!r}; valid spawns: {', '.join(valid_spawns)}")
+    raw_rows = data.get("rows")
+    rows: list[SuiteRow] = []
+    if not isinstance(raw_rows, list) or not raw_rows:
+        errors.append("'rows' must be a non-empty list of {spawn, query, goal} rows")
+        raw_rows = []
+    seen: dict[str, int] = {}
+    for i, raw in enumerate(raw_rows, 1):
+        row = _row(i, raw, scene, errors)
+        if row is None:
+            continue
+        if row.id in seen:
+            errors.append(f"row {i} ({row.id}): the id is also used by row {seen[row.id]}; row ids must be unique")
+            continue
+        seen[row.id] = i
+        rows.append(row)
+    if errors:
+        raise SuiteError(f"suite {source} is invalid:\n  - " + "\n  - ".join(errors))
+    return Suite(name=str(data.get("name") or default_name), rows=tuple(rows), scene=scene.name, repetitions=reps,
+                 max_steps=max_steps, seed=seed, profile=profile, spawn_jitter_m=jm, spawn_jitter_deg=jd,
+                 spawn_labels={str(k): str(v) for k, v in labels.items()},
+                 description=str(data.get("description") or ""), source=source)
+
+
+def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
+    if not isinstance(raw, dict):
+        errors.append(f"row {i}: expected a mapping with spawn, query and goal, got {raw!r}")
+        return None
+    where = f"row {i}" + (f" ({raw['id']})" if raw.get("id") else "")
+    unknown = sorted(set(raw) - set(_ROW_KEYS))
+    if unknown:
+        errors.append(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; valid keys: {', '.join(_ROW_KEYS)}")
+    spawn, query = raw.get("spawn"), raw.get("query")
+    before = len(errors)
+    valid_spawns = [s.id for s in scene.spawns]
+    if spawn not in valid_spawns:
+        errors.append(f"{where}: unknown spawn {spawn!r}; valid spawns: {', '.join(valid_spawns)}")
+    if not isinstance(query, str) or not query.strip():
+        errors.append(f"{where}: 'query' must be a non-empty string, got {query!r}")
+        return None
+    try:
+        task = parse_query(query, scene)
+    except VLNPilotError as exc:
+        errors.append(f"{where}: {exc}")
+        return None
+    goal = raw.get("goal")
+    if goal is not None:
+        if isinstance(goal, str):
+            goal = {"room": goal}
+        if not isinstance(goal, dict) or set(goal) - {"room", "target"} or "room" not in goal:
+            errors.append(f"{where}: 'goal' must be a room name or a mapping {{room, target}}, got {goal!r}")
+        else:
+            room_ids, target_ids = [r.id for r in scene.rooms], [t.id for t in scene.targets]
+            room, target = goal.get("room"), goal.get("target")
+            if room not in room_ids:
+                errors.append(f"{where}: unknown goal room {room!r}; valid rooms: {', '.join(room_ids)}")
+            elif target is not None and target not in target_ids:
+                errors.append(f"{where}: unknown goal target {target!r}; valid targets: "
+                              + ", ".join(f"{t.id} (in {t.room})" for t in scene.targets))
+            elif target is not None and scene.target(target).room != room:
+                errors.append(f"{where}: goal target {target!r} is in {scene.target(target).room}, not in {room}")
+            elif (room, target) != (task.goal_room, task.goal_target):
+                parsed = task.goal_room + (f" / {task.goal_target}" if task.goal_target else "")
+                errors.append(f"{where}: the goal says {room}" + (f" / {target}" if target else "")
+                              + f" but the query {query!r} parses to {parsed}")
+    row_id = raw.get("id")
+    if row_id is None:
+        row_id = _slug(f"{spawn}-{query}")
+    elif not isinstance(row_id, str) or not _ID_RE.match(row_id):
+        errors.append(f"{where}: id {row_id!r} must be letters, digits, '.', '_' or '-' (it names a directory)")
+    if len(errors) > before:
+        return None
+    return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target)
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:60] or "row"

@@ -1,0 +1,235 @@
+"""The bench tables: the paper's Table 4 layout (Markdown, CSV, LaTeX with booktabs) and a per-pilot summary.
+
+    Starting Room | Query | for each pilot: Ach. (successes/repetitions), Coll. (episodes ended by a
+    collision), Steps (episodes that hit the step limit); '--' for zero, as in the paper.
+
+Rows are grouped by starting room in suite order. Provenance (pilot and model, prompt hash, git SHA,
+seeds, config hash) is a footnote in Markdown and LaTeX, and columns in the CSV files. Output depends only
+on the suite, the pilots and the records (no clock), so a results file always renders to the same bytes.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from itertools import groupby
+from typing import Any
+
+from vlnpilot.bench.results import CellStats, PilotSummary, cell_stats, summarize
+from vlnpilot.bench.suite import Suite, SuiteRow, episode_seed
+
+TABLE_MD, TABLE_CSV, TABLE_TEX, SUMMARY_CSV = "table.md", "table.csv", "table.tex", "summary.csv"
+LEGEND = ("Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; Steps = episodes "
+          "that reached the step limit; -- = none.")
+
+
+def _dash(n: int) -> str:
+    return str(n) if n else "--"
+
+
+def _ach(c: CellStats) -> str:
+    return f"{c.successes}/{c.episodes}"
+
+
+def _fmt(x: float | None, digits: int = 3) -> str:
+    return "--" if x is None else f"{x:.{digits}f}"
+
+
+def _join(values: Sequence[str] | set[str]) -> str:
+    vals = sorted({str(v) for v in values if v is not None})
+    return ", ".join(vals) if vals else "--"
+
+
+class _Data:
+    """Records indexed by (pilot, row), with the provenance of each pilot."""
+
+    def __init__(self, suite: Suite, pilots: Sequence[str], records: Sequence[dict[str, Any]]):
+        self.suite, self.pilots = suite, list(pilots)
+        self.cells: dict[tuple[str, str], list[dict[str, Any]]] = {}
+        for r in records:
+            self.cells.setdefault((r["pilot"], r["row"]), []).append(r)
+        self.by_pilot = {p: [r for r in records if r["pilot"] == p] for p in self.pilots}
+        self.expected = len(suite.rows) * suite.repetitions * len(self.pilots)
+        self.finished = sum(len(v) for v in self.by_pilot.values())
+
+    def cell(self, pilot: str, row: SuiteRow) -> CellStats:
+        return cell_stats(self.cells.get((pilot, row.id), []))
+
+    def groups(self) -> list[tuple[str, list[SuiteRow]]]:
+        return [(self.suite.spawn_label(spawn), list(rows))
+                for spawn, rows in groupby(self.suite.rows, key=lambda r: r.spawn)]
+
+    def seeds(self, row: SuiteRow) -> list[int]:
+        return [episode_seed(self.suite.seed, row.id, rep) for rep in range(1, self.suite.repetitions + 1)]
+
+    def provenance(self, pilot: str) -> dict[str, str]:
+        rs = self.by_pilot[pilot]
+        return {"model": _join([r.get("model") for r in rs]),
+                "shield": _join([r["result"].get("shield") for r in rs]),
+                "prompt_hash": _join([r.get("provenance", {}).get("prompt_hash") for r in rs]),
+                "git_sha": _join([r.get("provenance", {}).get("git_sha") for r in rs])}
+
+    def summaries(self) -> list[PilotSummary]:
+        return [summarize(p, self.by_pilot[p]) for p in self.pilots]
+
+    def notes(self, config_hash: str | None) -> list[str]:
+        out = []
+        for p in self.pilots:
+            pv = self.provenance(p)
+            shield = f", shield {pv['shield']}" if pv["shield"] != "--" else ""
+            out.append(f"{p}: model {pv['model']}{shield}, prompt hash {pv['prompt_hash']}, git SHA {pv['git_sha']}")
+        out.append(f"seeds: per repetition, sha256 of (base seed {self.suite.seed}, row, repetition); "
+                   "listed per row in table.csv")
+        tail = f"{self.finished}/{self.expected} episodes finished"
+        if self.finished < self.expected:
+            tail += " (incomplete: rerun the bench with --resume)"
+        if config_hash:
+            tail += f"; config hash {config_hash}"
+        out.append(tail)
+        return out
+
+
+# ---------------------------------------------------------------------------------------------- Markdown
+def _md_row(cells: Sequence[str]) -> str:
+    return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
+
+
+def _summary_cells(s: PilotSummary) -> list[str]:
+    rate = f"{s.successes}/{s.episodes} ({100 * s.success_rate:.1f}%)"
+    ci = f"{100 * s.ci_low:.1f}-{100 * s.ci_high:.1f}%" if s.episodes else "--"
+    return [s.pilot, _join(s.models), rate, ci, f"{s.spl:.3f}", f"{s.mean_steps:.1f}", str(s.collisions),
+            str(s.steps_exceeded), str(s.false_successes), str(s.pilot_errors), str(s.invalid_decisions),
+            str(s.oscillations), str(s.interventions), f"{s.input_tokens}/{s.output_tokens}", f"{s.cost_usd:.4f}",
+            _fmt(s.latency_p50_s), _fmt(s.latency_p95_s)]
+
+
+SUMMARY_HEADER = ["Pilot", "Model", "Success", "95% CI (Wilson)", "SPL", "Mean steps", "Collisions",
+                  "Steps exceeded", "False successes", "Pilot errors", "Invalid decisions", "Oscillations",
+                  "Interventions", "Tokens in/out", "Cost (USD)", "Latency p50 (s)", "Latency p95 (s)"]
+
+
+def render_markdown(data: _Data, config_hash: str | None = None) -> str:
+    head = ["Starting Room", "Query"] + [f"{p} {c}" for p in data.pilots for c in ("Ach.", "Coll.", "Steps")]
+    lines = [f"# Bench: {data.suite.name}", "", _md_row(head), _md_row(["---"] * 2 + [":---:"] * (len(head) - 2))]
+    for label, rows in data.groups():
+        for i, row in enumerate(rows):
+            cells = [label if i == 0 else "", row.query]
+            for p in data.pilots:
+                c = data.cell(p, row)
+                cells += [_ach(c), _dash(c.collisions), _dash(c.steps_exceeded)]
+            lines.append(_md_row(cells))
+    lines += ["", LEGEND, "", "## Summary per pilot", "", _md_row(SUMMARY_HEADER),
+              _md_row(["---"] * 2 + ["---:"] * (len(SUMMARY_HEADER) - 2))]
+    lines += [_md_row(_summary_cells(s)) for s in data.summaries()]
+    lines += ["", "SPL: mean over episodes of success weighted by path length; latency: per pilot call.", "",
+              "Provenance:", ""]
+    lines += [f"- {n}" for n in data.notes(config_hash)]
+    return "\n".join(lines) + "\n"
+
+
+# ---------------------------------------------------------------------------------------------------- CSV
+def render_csv(data: _Data) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    head = ["Starting Room", "Query"] + [f"{p} {c}" for p in data.pilots for c in ("Ach.", "Coll.", "Steps")]
+    head += ["Row", "Spawn", "Goal Room", "Goal Target", "Seeds"]
+    head += [f"{p} {c}" for p in data.pilots for c in ("Model", "Shield", "Prompt Hash", "Git SHA")]
+    w.writerow(head)
+    prov = {p: data.provenance(p) for p in data.pilots}
+    for label, rows in data.groups():
+        for row in rows:
+            cells: list[Any] = [label, row.query]
+            for p in data.pilots:
+                c = data.cell(p, row)
+                cells += [_ach(c), c.collisions, c.steps_exceeded]
+            cells += [row.id, row.spawn, row.goal_room, row.goal_target or "", " ".join(map(str, data.seeds(row)))]
+            for p in data.pilots:
+                cells += [prov[p]["model"], prov[p]["shield"], prov[p]["prompt_hash"], prov[p]["git_sha"]]
+            w.writerow(cells)
+    return buf.getvalue()
+
+
+def render_summary_csv(data: _Data) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["pilot", "model", "episodes", "successes", "success_rate", "ci95_low", "ci95_high", "spl",
+                "mean_steps", "collisions", "steps_exceeded", "false_successes", "pilot_errors",
+                "invalid_decisions", "oscillations", "interventions", "input_tokens", "output_tokens", "cost_usd",
+                "pilot_calls", "latency_p50_s", "latency_p95_s", "shield", "prompt_hash", "git_sha"])
+    for s in data.summaries():
+        pv = data.provenance(s.pilot)
+        w.writerow([s.pilot, _join(s.models), s.episodes, s.successes, f"{s.success_rate:.4f}", f"{s.ci_low:.4f}",
+                    f"{s.ci_high:.4f}", f"{s.spl:.4f}", f"{s.mean_steps:.2f}", s.collisions, s.steps_exceeded,
+                    s.false_successes, s.pilot_errors, s.invalid_decisions, s.oscillations, s.interventions,
+                    s.input_tokens,
+                    s.output_tokens, f"{s.cost_usd:.6f}", s.pilot_calls,
+                    "" if s.latency_p50_s is None else f"{s.latency_p50_s:.4f}",
+                    "" if s.latency_p95_s is None else f"{s.latency_p95_s:.4f}", pv["shield"], pv["prompt_hash"],
+                    pv["git_sha"]])
+    return buf.getvalue()
+
+
+# -------------------------------------------------------------------------------------------------- LaTeX
+_TEX_ESCAPES = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_",
+                "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
+
+
+def tex_escape(text: str) -> str:
+    return "".join(_TEX_ESCAPES.get(ch, ch) for ch in str(text))
+
+
+def render_tex(data: _Data, config_hash: str | None = None) -> str:
+    """Two booktabs tables (needs \\usepackage{booktabs,multirow}): Table 4's layout, then the summary."""
+    n = len(data.pilots)
+    e = tex_escape
+    lines = [
+        "% Generated by vln-pilot bench; needs \\usepackage{booktabs} and \\usepackage{multirow}.",
+        r"\begin{table}[ht]", r"\centering",
+        r"\caption{Bench " + e(data.suite.name) + r": achievements (successes/repetitions), collisions and "
+        r"episodes that reached the step limit, grouped by starting room.}",
+        r"\label{tab:bench-" + e(data.suite.name) + "}",
+        r"\begin{tabular}{lp{4.2cm}" + "ccc" * n + "}", r"\toprule",
+        r"\textbf{Starting Room} & \textbf{Query} & "
+        + " & ".join(r"\multicolumn{3}{c}{\textbf{" + e(p) + "}}" for p in data.pilots) + r" \\",
+        "".join(rf"\cmidrule(lr){{{3 + 3 * i}-{5 + 3 * i}}}" for i in range(n)),
+        " & & " + " & ".join([r"\textbf{Ach.} & \textbf{Coll.} & \textbf{Steps}"] * n) + r" \\",
+    ]
+    for label, rows in data.groups():
+        lines.append(r"\midrule")
+        for i, row in enumerate(rows):
+            first = (r"\multirow{" + str(len(rows)) + "}{*}{" + e(label) + "}") if i == 0 and len(rows) > 1 \
+                else (e(label) if i == 0 else "")
+            cells = [first, e(row.query)]
+            for p in data.pilots:
+                c = data.cell(p, row)
+                cells += [_ach(c), _dash(c.collisions), _dash(c.steps_exceeded)]
+            lines.append(" & ".join(cells) + r" \\")
+    lines += [r"\bottomrule", r"\end{tabular}", "", r"\smallskip", r"\footnotesize " + e(LEGEND) + r"\\",
+              r"Provenance: " + "; ".join(e(x) for x in data.notes(config_hash)) + ".", r"\end{table}", ""]
+    cols = ["Pilot", "Success", "95\\% CI", "SPL", "Steps", "Coll.", "Exc.", "False", "Invalid", "Osc.",
+            "Interv.", "Tokens in/out", "Cost (\\$)", "p50 (s)", "p95 (s)"]
+    lines += [r"\begin{table}[ht]", r"\centering",
+              r"\caption{Bench " + e(data.suite.name) + r": summary per pilot. Success rate with its 95\% Wilson "
+              r"interval, SPL, mean steps, collisions, step limits reached, false successes, invalid decisions, "
+              r"oscillations, safety-layer interventions, tokens, cost and pilot-call latency.}",
+              r"\label{tab:bench-" + e(data.suite.name) + "-summary}", r"\small",
+              r"\begin{tabular}{l" + "r" * (len(cols) - 1) + "}", r"\toprule", " & ".join(cols) + r" \\",
+              r"\midrule"]
+    for s in data.summaries():
+        ci = f"{100 * s.ci_low:.1f}--{100 * s.ci_high:.1f}\\%" if s.episodes else "--"
+        lines.append(" & ".join([
+            e(s.pilot), f"{s.successes}/{s.episodes}", ci, f"{s.spl:.3f}", f"{s.mean_steps:.1f}", str(s.collisions),
+            str(s.steps_exceeded), str(s.false_successes), str(s.invalid_decisions), str(s.oscillations),
+            str(s.interventions), f"{s.input_tokens}/{s.output_tokens}", f"{s.cost_usd:.4f}", _fmt(s.latency_p50_s),
+            _fmt(s.latency_p95_s)]) + r" \\")
+    lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}", ""]
+    return "\n".join(lines)
+
+
+def render_tables(suite: Suite, pilots: Sequence[str], records: Sequence[dict[str, Any]],
+                  config_hash: str | None = None) -> dict[str, str]:
+    """{file name: content} for table.md, table.csv, table.tex and summary.csv."""
+    data = _Data(suite, pilots, records)
+    return {TABLE_MD: render_markdown(data, config_hash), TABLE_CSV: render_csv(data),
+            TABLE_TEX: render_tex(data, config_hash), SUMMARY_CSV: render_summary_csv(data)}
