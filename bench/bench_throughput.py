@@ -24,6 +24,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
+from machine import cpu_model  # bench/machine.py, beside this script
+
 from fakes import FakeOpenAI  # noqa: E402
 from vlnpilot.bench.runner import BenchSettings, run_bench  # noqa: E402
 
@@ -41,17 +43,6 @@ def rotate_in_place(request) -> dict:
     rooms = [r for r in (request.enum("room") or []) if r != "unknown"]
     return {"room": rooms[0] if rooms else "unknown", "movement": move, "state": state,
             "description": "a throughput test: turning in place", "door_position": "not_visible"}
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def main() -> None:

@@ -21,6 +21,8 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
+from machine import cpu_model  # bench/machine.py, beside this script
+
 # Table 4 of the paper: (spawn, query), in its order.
 PAPER_SUITE: tuple[tuple[str, str], ...] = (
     ("living_room", "Go to the bathroom"),
@@ -98,16 +100,6 @@ def summarise(rows: list[dict], shields: list[str]) -> str:
     return "\n".join(lines)
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown CPU"
-
-
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=50, help="repetitions of each of the ten rows (50 -> 500 episodes)")
@@ -131,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
         "",
         f"{per_condition} episodes per condition ({args.reps} x {len(PAPER_SUITE)} rows, same seeds in every "
         f"condition), 50-step limit, margin 5 cm. Wall time {wall:.0f} s for {len(rows)} episodes on "
-        f"{args.workers} worker processes, {_cpu_model()} ({os.cpu_count()} cores visible), Python "
+        f"{args.workers} worker processes, {cpu_model()} ({os.cpu_count()} cores visible), Python "
         f"{platform.python_version()}.",
         "",
         summarise(rows, shields),

@@ -15,6 +15,8 @@ import platform
 import statistics
 import time
 
+from machine import cpu_model  # bench/machine.py, beside this script
+
 from vlnpilot.commands import get_command
 from vlnpilot.sim import SimConfig, Simulator, drone  # selects the headless GL backend before mujoco loads
 
@@ -22,17 +24,6 @@ from vlnpilot.sim import SimConfig, Simulator, drone  # selects the headless GL 
 # which exercises the bisection as well.
 SEQUENCE = ("A1", "B1", "A2", "C2", "D1", "A1", "D2", "C1", "A3", "B2", "E", "A1", "C3", "A2", "B1", "A1")
 BUDGET_MS = 40.0
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as f:
-            for line in f:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def percentile(values: list[float], q: float) -> float:
