@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -51,6 +53,9 @@ class EpisodeConfig:
     shield: str = "off"  # off | geometry | depth (the CLI defaults to safety.DEFAULT_SHIELD in the simulator)
     safety: SafetyConfig = field(default_factory=SafetyConfig)  # margin, door assist, oscillation guard, depth
     overlay: str | None = None  # None | "corridor": draw the propeller-tip corridor on the image the pilot sees
+    # Wall-clock bound on one step's pilot calls, re-asks and provider retries included, for pilots that wait on
+    # a network (`uses_step_deadline`); when it passes the drone hovers and the step counts an invalid decision.
+    step_deadline_s: float | None = 120.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.max_steps, int) or self.max_steps < 1:
@@ -61,6 +66,8 @@ class EpisodeConfig:
             raise ConfigError("max_reasks must be >= 0")
         if str(self.shield).lower() not in SHIELDS:
             raise ConfigError(f"unknown shield {self.shield!r}; valid shields: {', '.join(SHIELDS)}")
+        if self.step_deadline_s is not None and not self.step_deadline_s > 0:
+            raise ConfigError(f"step_deadline_s must be positive or None, got {self.step_deadline_s!r}")
         if self.overlay is not None and self.overlay not in OVERLAYS:
             raise ConfigError(f"unknown overlay {self.overlay!r}; valid overlays: {', '.join(OVERLAYS)}")
 
@@ -136,6 +143,41 @@ def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> _Answer:
                    kind="invalid_decision" if error else None)
 
 
+class _Deadline:
+    """Runs pilot calls in a helper thread so that a step can stop waiting when its deadline passes.
+
+    A call still running at the deadline is abandoned (the provider SDK's own timeout ends it later) and
+    the next call gets a fresh thread, so a hung request never blocks the episode.
+    """
+
+    def __init__(self, seconds: float | None):
+        self.seconds = seconds
+        self._pool: ThreadPoolExecutor | None = None
+
+    def ask(self, pilot: Pilot, pin: PilotInput, state: State, profile: str, remaining_s: float) -> _Answer:
+        if self.seconds is None:
+            return _ask(pilot, pin, state, profile)
+        if remaining_s <= 0:
+            return self.expired()
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pilot-call")
+        future = self._pool.submit(_ask, pilot, pin, state, profile)
+        try:
+            return future.result(timeout=remaining_s)
+        except FutureTimeout:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            self._pool = None
+            return self.expired()
+
+    def expired(self) -> _Answer:
+        return _Answer(None, f"step_deadline: no valid answer within the step deadline of {self.seconds:g} s",
+                       kind="step_deadline")
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+
 def _reseed(pilot: Pilot, seed: int | None) -> None:
     """Give a stochastic pilot the episode's seed (pilots with a `reseed(seed)` method, e.g. noisy-oracle)."""
     if seed is not None and callable(getattr(pilot, "reseed", None)):
@@ -180,6 +222,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         })
 
     steps = 0
+    bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
+    deadline = _Deadline(config.step_deadline_s if bounded else None)
     for step in range(1, config.max_steps + 1):
         steps = step
         feedback: list[str] = list(notes)
@@ -187,10 +231,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         decision: Decision | None = None
         fatal = False
         image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
+        step_end = time.monotonic() + (config.step_deadline_s or 0.0)
         for attempt in range(1 + config.max_reasks):
             pin = PilotInput(image=image, query=task.query, topological_map=topo, state=state,
                              previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback))
-            answer = _ask(pilot, pin, state, config.profile)
+            answer = deadline.ask(pilot, pin, state, config.profile, step_end - time.monotonic())
             calls += 1
             usage = usage + answer.usage
             fatal = answer.fatal
@@ -199,7 +244,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                 break
             failures.append({"attempt": attempt, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
                              "raw_text": answer.raw_text})
-            if fatal:
+            if fatal or answer.kind == "step_deadline":
                 break
             why = answer.hint or f"{answer.error}. Answer again with valid values."
             feedback = [*notes, f"Your previous answer was rejected: {why}"]
@@ -243,6 +288,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                 outcome, reason = ("success" if ok else "false_success"), why
             break
 
+    deadline.close()
     final_room = gt.room() if gt is not None else None
     result = EpisodeResult(
         outcome=outcome, reason=reason, steps=steps, path_length_m=round(path.value(), 4),

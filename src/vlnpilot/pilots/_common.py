@@ -23,6 +23,7 @@ from vlnpilot.errors import ConfigError
 from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage
 
 log = logging.getLogger(__name__)
+_UNPRICED_WARNED: set[tuple[str, str]] = set()
 T = TypeVar("T")
 
 # Reasons of PilotError that mean "the provider is (temporarily) not answering": the server maps
@@ -257,6 +258,8 @@ class ModelPilot:
     on transport/HTTP failures (after the SDK's or our retries).
     """
 
+    uses_step_deadline = True  # waits on a network: the controller bounds each step (EpisodeConfig.step_deadline_s)
+
     name: ClassVar[str]
     provider: ClassVar[str]
     default_model: ClassVar[str]
@@ -297,7 +300,8 @@ class ModelPilot:
         else:
             self._prices = pricing.load_prices(prices)
         self.price_known = pricing.find_price(self.model, self._prices) is not None
-        if not self.price_known:
+        if not self.price_known and (self.provider, self.model) not in _UNPRICED_WARNED:
+            _UNPRICED_WARNED.add((self.provider, self.model))  # once per model and process, not per pilot
             log.warning("no price for %s model %r (prices as of %s): its cost is reported as 0",
                         self.provider, self.model, pricing.PRICES_AS_OF)
 

@@ -52,6 +52,8 @@ class RemotePilot:
     jpeg_quality, max_side, transport (an httpx transport, for tests).
     """
 
+    uses_step_deadline = True  # waits on a network: the controller bounds each step (EpisodeConfig.step_deadline_s)
+
     name = "remote"
 
     def __init__(
