@@ -23,19 +23,10 @@ from pathlib import Path
 
 from machine import cpu_model  # bench/machine.py, beside this script
 
-# Table 4 of the paper: (spawn, query), in its order.
-PAPER_SUITE: tuple[tuple[str, str], ...] = (
-    ("living_room", "Go to the bathroom"),
-    ("living_room", "Go to the bedroom"),
-    ("living_room", "Go to the living room/kitchen"),
-    ("living_room", "Find the refrigerator in the living room or kitchen"),
-    ("bedroom", "Go to the bedroom"),
-    ("bedroom", "Go to the living room/kitchen"),
-    ("bedroom", "Find the mirror in the bedroom"),
-    ("bathroom", "Go to the bathroom"),
-    ("bathroom", "Go to the living room/kitchen"),
-    ("bathroom", "Find the sink in the bathroom"),
-)
+from vlnpilot.bench.suite import load_suite
+
+# Table 4 of the paper, (spawn, query) in its order, read from the built-in suite (one source of truth).
+PAPER_SUITE: tuple[tuple[str, str], ...] = tuple((row.spawn, row.query) for row in load_suite("paper").rows)
 OUTCOMES = ("success", "collision", "max_steps", "false_success", "pilot_error")
 
 _SIM = None

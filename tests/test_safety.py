@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from vlnpilot import tello_spec
+from vlnpilot.bench.suite import load_suite
 from vlnpilot.commands import COMMANDS, HOVER, get_command
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError, UnknownNameError
@@ -34,15 +35,7 @@ from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks import parse_query
 from vlnpilot.types import Pose
 
-PAPER_ROWS = [
-    ("living_room", "Go to the bathroom"), ("living_room", "Go to the bedroom"),
-    ("living_room", "Go to the living room/kitchen"),
-    ("living_room", "Find the refrigerator in the living room or kitchen"),
-    ("bedroom", "Go to the bedroom"), ("bedroom", "Go to the living room/kitchen"),
-    ("bedroom", "Find the mirror in the bedroom"),
-    ("bathroom", "Go to the bathroom"), ("bathroom", "Go to the living room/kitchen"),
-    ("bathroom", "Find the sink in the bathroom"),
-]
+PAPER_ROWS = [(row.spawn, row.query) for row in load_suite("paper").rows]  # the paper's Table 4
 CODES = sorted(COMMANDS)
 REACH = 0.5 + tello_spec.BOUNDING_RADIUS  # no command moves any part of the drone further than this
 
