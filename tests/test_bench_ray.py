@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -45,4 +46,9 @@ def test_ray_executor_gives_the_same_results_as_the_local_one(tmp_path: Path):
         for field in ("seed", "model", "run_dir", "pilot", "row", "rep"):
             assert a[key][field] == b[key][field]
     assert all(r["result"]["outcome"] == "success" for r in b.values())
-    assert (tmp_path / "ray" / "table.md").read_text() == (tmp_path / "local" / "table.md").read_text()
+    assert _without_latency(tmp_path / "ray" / "table.md") == _without_latency(tmp_path / "local" / "table.md")
+
+
+def _without_latency(table: Path) -> str:
+    """The table with the two latency cells (p50, p95) of each summary row blanked: wall-clock, never equal."""
+    return re.sub(r"\| [0-9.]+ \| [0-9.]+ \|$", "| p50 | p95 |", table.read_text(), flags=re.M)
