@@ -37,7 +37,7 @@ from vlnpilot.safety import (
 )
 from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge, shortest_path_length, spl
-from vlnpilot.types import GroundTruth, Observation
+from vlnpilot.types import GroundTruth, Observation, Pose
 
 OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
 
@@ -251,7 +251,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
 
         if fatal:
             outcome, reason = "pilot_error", failures[-1]["reason"]
-            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs, None, None, None)
+            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None)
             break
 
         pose_before = obs.pose
@@ -310,9 +310,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
 
 def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,
             decision: Decision | None, failures: list[dict[str, Any]], command: Command | None,
-            next_state: State | None, obs: Observation, pose_before_obs: Any, room_now: str | None,
+            next_state: State | None, obs: Observation, pose_before: Pose, room_now: str | None,
             reversal: bool | None, verdict: SafetyVerdict | None = None) -> None:
-    pose_before = pose_before_obs.pose if isinstance(pose_before_obs, Observation) else pose_before_obs
     record: dict[str, Any] = {
         "step": step,
         "state": state.value,
