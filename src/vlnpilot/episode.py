@@ -20,8 +20,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from vlnpilot.commands import HOVER, Command, get_command
-from vlnpilot.environment import Environment
-from vlnpilot.errors import ConfigError
+from vlnpilot.environment import Environment, capabilities_of
+from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
 from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
@@ -39,7 +39,9 @@ from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge, shortest_path_length, spl
 from vlnpilot.types import GroundTruth, Observation, Pose
 
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
+# halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move)
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted")
+JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
 
 
 @dataclass(frozen=True)
@@ -96,6 +98,7 @@ class EpisodeResult:
     interventions: int = 0  # commands changed by the safety layer (guard, door assist, shield)
     oscillation_events: int = 0  # oscillation stretches the guard detected (also with the shield off)
     shield: str = "off"
+    judged_by: str = "ground_truth"  # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
 
     @property
     def success(self) -> bool:
@@ -186,8 +189,13 @@ def _reseed(pilot: Pilot, seed: int | None) -> None:
 
 def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
-                on_step: StepCallback | None = None, pilot_spec: str | None = None) -> EpisodeResult:
-    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given."""
+                on_step: StepCallback | None = None, pilot_spec: str | None = None,
+                judge_outcome: JudgeOutcome | None = None) -> EpisodeResult:
+    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given.
+
+    Without ground truth (a real robot) a declared final state is a success only as declared, unless
+    `judge_outcome` (the operator) confirms or rejects it.
+    """
     config = config or EpisodeConfig()
     t_start = time.perf_counter()
     obs: Observation = env.reset(spawn, seed=config.seed)
@@ -207,6 +215,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     calls = invalid = failed_streak = 0
     state, previous = State.RECOGNIZE_ROOM, None  # Start: the controller takes off, then Recognize Room
     outcome, reason, contact = "max_steps", f"no final state within {config.max_steps} steps", None
+    judged_by = "ground_truth" if gt is not None else "none"
 
     if recorder is not None:
         frames = recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
@@ -217,6 +226,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
+            "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
         })
@@ -264,7 +274,12 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             command, next_state = get_command(decision.movement), parse_state(decision.state)
         verdict = safety.filter(step, state, command, next_state, pose_before)
         command, next_state, notes = verdict.command, verdict.next_state, verdict.feedback
-        obs = env.step(command)
+        halt: RobotHalt | None = None
+        try:
+            obs = env.step(command)
+        except RobotHalt as exc:  # a real robot's safety rule (battery, geofence, lost reply) ends the episode
+            halt = exc
+            obs = exc.observation if isinstance(exc.observation, Observation) else obs
         safety.observe(obs)
         path.update(pose_before, obs.pose)
         reversal = osc.update(command)
@@ -273,6 +288,9 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                 room_now, reversal, verdict)
         previous = command.code
 
+        if halt is not None:
+            outcome, reason = "halted", str(halt)
+            break
         if obs.collided:
             outcome, reason, contact = "collision", f"touched {obs.contact}", obs.contact
             break
@@ -281,8 +299,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             break
         state = next_state
         if state in FINAL_STATES:
-            if gt is None:
-                outcome, reason = "success", "final state declared (no ground truth to judge it)"
+            if gt is None and judge_outcome is not None:
+                ok, reason = judge_outcome(task, state)
+                outcome, judged_by = ("success" if ok else "false_success"), "operator"
+            elif gt is None:
+                outcome, reason, judged_by = "success", "final state declared (no ground truth to judge it)", "declared"
             else:
                 ok, why = judge(task, state, gt, config.success)
                 outcome, reason = ("success" if ok else "false_success"), why
@@ -298,7 +319,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         input_tokens=usage.input_tokens, cached_tokens=usage.cached_tokens, output_tokens=usage.output_tokens,
         cost_usd=round(usage.cost_usd, 6), latency_s_total=round(usage.latency_s, 4), pilot_calls=calls,
         wall_time_s=round(time.perf_counter() - t_start, 3), interventions=len(safety.interventions),
-        oscillation_events=len(safety.events), shield=safety.name,
+        oscillation_events=len(safety.events), shield=safety.name, judged_by=judged_by,
     )
     if recorder is not None:
         recorder.finish({"result": result.to_dict(), "end_pose": obs.pose.as_dict(),
@@ -334,6 +355,8 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
         "oscillation_event": verdict.oscillation.to_dict() if verdict and verdict.oscillation else None,
         "safety_feedback": list(verdict.feedback) if verdict else [],
     }
+    if obs.info:  # a real robot's facts: frame age, battery, safety events
+        record["robot"] = obs.info
     if recorder is not None:
         record["frames"] = recorder.save_observation(step, obs.front_rgb, obs.rear_rgb)
         recorder.step(record)

@@ -152,7 +152,7 @@ class TelloEmulator:
         while not self._stop.is_set():
             try:
                 data, sender = self.sock.recvfrom(2048)
-            except (TimeoutError, socket.timeout):
+            except TimeoutError:
                 continue
             except OSError:
                 return

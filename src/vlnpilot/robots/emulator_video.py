@@ -15,8 +15,8 @@ import socket
 import threading
 import time
 from collections import deque
-from fractions import Fraction
 from collections.abc import Callable
+from fractions import Fraction
 
 import av
 import numpy as np
