@@ -95,16 +95,28 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
-        shield: Annotated[str, typer.Option("--shield", help="Safety shield: off, geometry or depth.")] = "geometry",
+        shield: Annotated[str | None, typer.Option(
+            "--shield", help="off, geometry, depth or assist (default: geometry; with a Tello: assist).")] = None,
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
+        robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator) or tello.")] = "sim",
+        tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
+        judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
+                                           "declared outcome.")] = "ask",
         ) -> None:
-    """Fly one episode on the embedded simulator, record it and write its report."""
+    """Fly one episode on the embedded simulator (or a real Tello), record it and write its report."""
+    from vlnpilot.environment import check_capabilities
     from vlnpilot.episode import EpisodeConfig, run_episode
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.record import Recorder, check_writable, default_run_dir
+    from vlnpilot.robots.operator import ConsoleOperator, make_judge
+    from vlnpilot.robots.session import DEFAULT_SHIELDS, check_robot, open_robot, robot_capabilities
     from vlnpilot.scene import load_scene
-    from vlnpilot.sim import Simulator
     from vlnpilot.tasks import parse_query
+
+    robot = check_robot(robot, tello_host)
+    shield = shield or DEFAULT_SHIELDS[robot]
+    operator = ConsoleOperator()
+    judge_outcome = make_judge(judge, operator) if robot == "tello" else None
 
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
@@ -116,6 +128,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
     options = {"base_url": base_url} if base_url else {}
     pilot_obj = make_pilot(pilot, **options)
+    check_capabilities(robot_capabilities(robot), robot, shield=shield, pilot=pilot_obj)  # before anything flies
     run_dir = check_writable(out or default_run_dir("runs", f"{spawn_id}-{query}"))
 
     def show(rec: dict) -> None:
@@ -130,11 +143,12 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
-    with Simulator(sc) as env:
+    with open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
+                    operator=operator) as env:
         recorder = Recorder(run_dir)
         try:
             result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
-                                 pilot_spec=pilot)
+                                 pilot_spec=pilot, judge_outcome=judge_outcome)
         except KeyboardInterrupt:
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
             raise typer.Exit(130) from None
@@ -205,6 +219,28 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite
         from vlnpilot.report.html import write_bench_report
 
         console.print(f"report: {escape(str(write_bench_report(bench_dir)))}")
+
+
+@app.command("tello-emulator")
+def tello_emulator(scene: SceneOpt = "cabin",
+                   spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
+                   host: Annotated[str, typer.Option("--host", help="A loopback address.")] = "127.0.0.1",
+                   port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8889,
+                   battery: Annotated[float, typer.Option("--battery", min=0, max=100, help="Start %.")] = 100.0,
+                   drop_replies: Annotated[float, typer.Option("--drop-replies", min=0, max=0.99)] = 0.0,
+                   video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
+                   ) -> None:
+    """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
+    from vlnpilot.robots.emulator import EmulatorConfig
+    from vlnpilot.robots.session import serve_emulator
+    from vlnpilot.scene import load_scene
+
+    sc = load_scene(scene)
+    if spawn is not None:
+        sc.spawn(spawn)  # validate: one line listing the spawns
+    config = EmulatorConfig(host=host, port=port, battery_pct=battery, drop_replies=drop_replies,
+                            video_delay_s=video_delay)
+    serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 
 @app.command("serve")

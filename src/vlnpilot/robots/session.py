@@ -1,0 +1,74 @@
+"""Choosing the robot for `vln-pilot run --robot sim|tello` and serving the emulator; the CLI's thin wiring."""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+from vlnpilot.environment import Capabilities
+from vlnpilot.errors import ConfigError, UnknownNameError
+from vlnpilot.scene import Scene
+
+ROBOTS = ("sim", "tello")
+DEFAULT_SHIELDS = {"sim": "geometry", "tello": "assist"}  # the Tello has neither ground truth nor depth
+
+
+def check_robot(robot: str, tello_host: str | None) -> str:
+    key = str(robot).strip().lower()
+    if key not in ROBOTS:
+        raise UnknownNameError("robot", robot, ROBOTS)
+    if tello_host is not None and key != "tello":
+        raise ConfigError("--tello-host applies to --robot tello only")
+    return key
+
+
+def robot_capabilities(robot: str) -> Capabilities:
+    if robot == "tello":
+        from vlnpilot.robots.tello import TelloEnv
+
+        return TelloEnv.capabilities
+    from vlnpilot.sim.simulator import Simulator
+
+    return Simulator.capabilities
+
+
+@contextmanager
+def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
+               operator: Any = None) -> Iterator[Any]:
+    """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened."""
+    if robot == "sim":
+        from vlnpilot.sim import Simulator
+
+        with Simulator(scene) as env:
+            yield env
+        return
+    from vlnpilot.robots.tello import TelloEnv
+    from vlnpilot.robots.tello_config import load_tello_config
+
+    config = load_tello_config(**({"host": tello_host} if tello_host else {}))
+    env = TelloEnv(scene, config, event_log=event_log, operator=operator)
+    try:
+        yield env
+    finally:
+        env.close()
+
+
+def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,
+                   stop: threading.Event | None = None) -> None:
+    """Run the Tello emulator until Ctrl-C (or `stop`)."""
+    from vlnpilot.robots.emulator import TelloEmulator
+
+    stop = stop or threading.Event()
+    with TelloEmulator(scene, config, spawn=spawn) as emu:
+        host, port = emu.address
+        say(f"Tello emulator (SDK 2.0) on {host}:{port}: state to port {config.state_port}, H.264 video to port "
+            f"{config.video_port}; drone at spawn {spawn or emu.sim.scene.spawns[0].id} of {emu.sim.scene.name}. "
+            "Fly it with: vln-pilot run \"...\" --robot tello --tello-host 127.0.0.1. Ctrl-C stops it.")
+        try:
+            while not stop.wait(0.5):
+                pass
+        except KeyboardInterrupt:
+            say(f"stopped; it executed {len(emu.log.executed)} moves")
