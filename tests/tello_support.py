@@ -6,6 +6,7 @@ local ports (picked free at import); each emulator gets its own command and vide
 
 from __future__ import annotations
 
+import io
 import ipaddress
 import socket
 from contextlib import contextmanager
@@ -15,6 +16,7 @@ import pytest
 
 from vlnpilot.robots.clock import Clock
 from vlnpilot.robots.emulator import EmulatorConfig, TelloEmulator
+from vlnpilot.robots.operator import ConsoleOperator
 from vlnpilot.robots.tello import TelloEnv
 from vlnpilot.robots.tello_config import TelloConfig, load_tello_config
 
@@ -85,7 +87,8 @@ def emulator_config(**overrides: Any) -> EmulatorConfig:
 @contextmanager
 def rig(*, spawn: str = "living_room", clock: Clock | None = None, emulator: dict[str, Any] | None = None,
         backend: dict[str, Any] | None = None, **env_options: Any):
-    """An emulator and a TelloEnv talking to it; both closed afterwards."""
+    """An emulator and a TelloEnv talking to it; both closed afterwards. The operator presses Enter when asked."""
+    env_options.setdefault("operator", ConsoleOperator(io.StringIO("\n" * 8), io.StringIO()))
     with TelloEmulator("cabin", emulator_config(**(emulator or {})), spawn=spawn, clock=clock) as emu:
         env = TelloEnv("cabin", tello_config(emu, **(backend or {})), clock=clock, handle_sigint=False,
                        **env_options)

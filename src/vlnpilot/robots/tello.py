@@ -51,7 +51,7 @@ class TelloEnv:
         self.link: TelloLink | None = None
         self.events: list[dict[str, Any]] = []
         self._unreported: list[dict[str, Any]] = []
-        self.flying = self.awaiting_operator = self.streaming = False
+        self.flying = self.awaiting_operator = self.streaming = self.closed = False
         self.interrupts = 0
         self._old_sigint: Any = None
         self._home = self._pose = Pose(0.0, 0.0, self.scene.flight_altitude, 0.0)
@@ -254,8 +254,9 @@ class TelloEnv:
     # -- shutdown ---------------------------------------------------------------------------------------------
     def close(self) -> None:
         """Land (after the operator's word if a lost reply left the drone hovering), stop the video, let go."""
-        if self.link is None:
+        if self.link is None or self.closed:
             return
+        self.closed = True
         try:
             if self.flying and self.awaiting_operator:
                 self.operator.wait("The Tello is hovering after a lost reply. Press Enter to land it.")
