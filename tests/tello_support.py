@@ -90,8 +90,8 @@ def rig(*, spawn: str = "living_room", clock: Clock | None = None, emulator: dic
     """An emulator and a TelloEnv talking to it; both closed afterwards. The operator presses Enter when asked."""
     env_options.setdefault("operator", ConsoleOperator(io.StringIO("\n" * 8), io.StringIO()))
     with TelloEmulator("cabin", emulator_config(**(emulator or {})), spawn=spawn, clock=clock) as emu:
-        env = TelloEnv("cabin", tello_config(emu, **(backend or {})), clock=clock, handle_sigint=False,
-                       **env_options)
+        env_options.setdefault("handle_sigint", False)
+        env = TelloEnv("cabin", tello_config(emu, **(backend or {})), clock=clock, **env_options)
         try:
             yield emu, env
         finally:

@@ -44,6 +44,7 @@ class EmulatorConfig:
     rc_full_scale_mps: float = 1.0  # speed at rc 100
     rc_full_scale_dps: float = 90.0  # yaw rate at rc 100
     drop_replies: float = 0.0  # fraction of command replies never sent
+    drop_verbs: tuple[str, ...] = ()  # commands whose replies are always dropped, e.g. ("forward",)
     video_delay_s: float = 0.0
     fps: float = 15.0
     seed: int = 0
@@ -162,7 +163,9 @@ class TelloEmulator:
                 reply = self.handle(text)
             if reply is None:
                 continue
-            if self.config.drop_replies and self._rng.random() < self.config.drop_replies:
+            verb = text.split()[0].lower() if text else ""
+            if verb in self.config.drop_verbs or (
+                    self.config.drop_replies and self._rng.random() < self.config.drop_replies):
                 self.log.dropped.append(text)
                 continue
             try:

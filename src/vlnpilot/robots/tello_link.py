@@ -21,6 +21,7 @@ from vlnpilot.errors import VLNPilotError
 from vlnpilot.robots.clock import Clock
 from vlnpilot.robots.tello_config import TelloConfig
 
+CLOSED_HOST = "127.255.255.254"
 MIN_GAP_S = 0.1  # the Tello drops commands sent closer together than this (djitellopy's TIME_BTW_COMMANDS)
 
 
@@ -227,4 +228,8 @@ class TelloLink:
         import djitellopy.tello as dt
 
         dt.drones.pop(self.config.host, None)
-        self.tello.is_flying = self.tello.stream_on = False  # djitellopy's __del__ would land and resend
+        # djitellopy keys its reply queues by host and its __del__ lands, stops the stream and deletes the queue
+        # of `address[0]`: point this closed object at an unused loopback address (no name, so no DNS look-up),
+        # so that it cannot touch a newer link to the same host.
+        self.tello.is_flying = self.tello.stream_on = False
+        self.tello.address = (CLOSED_HOST, self.config.command_port)
