@@ -226,6 +226,8 @@ def tello_emulator(scene: SceneOpt = "cabin",
                    spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
                    host: Annotated[str, typer.Option("--host", help="A loopback address.")] = "127.0.0.1",
                    port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8889,
+                   state_port: Annotated[int, typer.Option("--state-port", min=1, max=65535)] = 8890,
+                   video_port: Annotated[int, typer.Option("--video-port", min=1, max=65535)] = 11111,
                    battery: Annotated[float, typer.Option("--battery", min=0, max=100, help="Start %.")] = 100.0,
                    drop_replies: Annotated[float, typer.Option("--drop-replies", min=0, max=0.99)] = 0.0,
                    video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
@@ -238,8 +240,8 @@ def tello_emulator(scene: SceneOpt = "cabin",
     sc = load_scene(scene)
     if spawn is not None:
         sc.spawn(spawn)  # validate: one line listing the spawns
-    config = EmulatorConfig(host=host, port=port, battery_pct=battery, drop_replies=drop_replies,
-                            video_delay_s=video_delay)
+    config = EmulatorConfig(host=host, port=port, state_port=state_port, video_port=video_port, battery_pct=battery,
+                            drop_replies=drop_replies, video_delay_s=video_delay)
     serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 
