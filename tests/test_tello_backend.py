@@ -2,21 +2,25 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
+import yaml
+from typer.testing import CliRunner
 
-from tello_support import loopback_only, rig  # noqa: F401  (loopback_only: autouse guard)
+from tello_support import emulator_config, loopback_only, rig, tello_config  # noqa: F401  (autouse guard)
+from vlnpilot import cli
 from vlnpilot.commands import get_command
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
 from vlnpilot.pilots.base import Decision, PilotInput, make_pilot
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.robots.clock import ManualClock
-from vlnpilot.robots.operator import ConsoleOperator, make_judge
+from vlnpilot.robots.emulator import TelloEmulator
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks import parse_query
-from vlnpilot.types import wrap_deg
+from vlnpilot.types import Pose, wrap_deg
 
 FAST_PULSES = {"calibration": {side: {"speed": 20, "duration_s": 0.5, "settle_s": 0.0}
                                for side in ("forward_10cm", "left_10cm", "right_10cm")} | {"move_settle_s": 0.0}}
@@ -43,18 +47,22 @@ def replay_in_sim(codes: list[str], spawn: str = "living_room"):
         return sim.pose
 
 
-def test_a_replayed_sim_trial_ends_where_the_simulator_ends(sim_trial: Path, tmp_path: Path) -> None:
-    answers = tmp_path / "answers.txt"
-    answers.write_text("y\n")
-    with answers.open() as stdin, rig(backend=FAST_PULSES, event_log=tmp_path / "events.jsonl",
-                                      operator=ConsoleOperator(stdin, open("/dev/null", "w"))) as (emu, env):
-        task = parse_query("Go to the bedroom", env.scene)
-        judge = make_judge("ask", env.operator)
-        result = run_episode(env, make_pilot(f"replay:{sim_trial}"), task, EpisodeConfig(shield="assist"),
-                             spawn="living_room", recorder=Recorder(tmp_path / "tello"), judge_outcome=judge)
-        tello_pose, dead_reckoned = emu.pose, env._pose
-    assert result.outcome == "success" and result.judged_by == "operator"  # confirmed by the operator's "y"
-    summary, steps = load_run(tmp_path / "tello")
+def test_a_replayed_sim_trial_ends_where_the_simulator_ends(sim_trial: Path, tmp_path: Path,
+                                                             monkeypatch: pytest.MonkeyPatch) -> None:
+    """`vln-pilot run --robot tello` end to end: djitellopy, UDP, H.264, the emulator, the recording and report."""
+    with TelloEmulator("cabin", emulator_config(), spawn="living_room") as emu:
+        settings = tmp_path / "tello.yaml"
+        settings.write_text(yaml.safe_dump(tello_config(emu, **FAST_PULSES).model_dump(exclude={"host"})))
+        monkeypatch.setenv("VLN_PILOT_TELLO_CONFIG", str(settings))
+        out = tmp_path / "tello"
+        result = CliRunner().invoke(cli.app, ["run", "Go to the bedroom", "--robot", "tello", "--tello-host",
+                                              "127.0.0.1", "--pilot", f"replay:{sim_trial}", "--out", str(out),
+                                              "--no-video", "--quiet"], input="y\n")
+        tello_pose = emu.pose
+    assert result.exit_code == 0, result.output
+    summary, steps = load_run(out)
+    assert summary["result"]["outcome"] == "success" and summary["result"]["judged_by"] == "operator"  # "y"
+    assert (out / "report.html").is_file()
     executed = [s["executed"] for s in steps]
     _, sim_steps = load_run(sim_trial)
     assert executed == [s["executed"] for s in sim_steps]  # the same commands (assist acted on the same poses)
@@ -64,12 +72,15 @@ def test_a_replayed_sim_trial_ends_where_the_simulator_ends(sim_trial: Path, tmp
     assert tello_pose.distance_xy(sim_pose) <= tolerance, (tello_pose, sim_pose)  # the emulated drone
     assert abs(wrap_deg(tello_pose.yaw_deg - sim_pose.yaw_deg)) <= 1.0
     assert abs(tello_pose.z - sim_pose.z) <= 0.01
-    assert dead_reckoned.distance_xy(sim_pose) <= 1e-6  # dead reckoning is exact in commanded displacements
+    dead_reckoned = Pose(**summary["end_pose"])
+    assert dead_reckoned.distance_xy(sim_pose) <= 1e-3  # dead reckoning is exact in commanded displacements
     assert summary["capabilities"] == {"ground_truth": False, "depth": False, "rear_view": False,
                                        "contact_sensing": False}
     assert all(s["collided"] is None for s in steps)  # unknown, not False
     assert all(s["robot"]["frame_fresh"] and s["robot"]["frame_after_settle_s"] >= 0.2 for s in steps)
-    assert "frames/rear_000.jpg" not in summary["start_frames"].values()  # no rear camera, no rear frames
+    assert "rear" not in summary["start_frames"]  # no rear camera, no rear frames
+    events = [json.loads(line)["event"] for line in (out / "robot_events.jsonl").read_text().splitlines()]
+    assert events == ["takeoff", "land"]
 
 
 class SlowPilot:

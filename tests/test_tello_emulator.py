@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import signal
 import socket
+import subprocess
+import sys
 import time
 
 import numpy as np
 import pytest
 
-from tello_support import emulator_config, loopback_only, rig  # noqa: F401  (loopback_only: autouse guard)
+from tello_support import emulator_config, free_udp_port, loopback_only, rig  # noqa: F401  (loopback_only: autouse guard)
 from vlnpilot.errors import ConfigError
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import OUT_OF_RANGE, EmulatorConfig, TelloEmulator
@@ -103,3 +106,32 @@ def test_a_fraction_of_replies_is_dropped_when_asked() -> None:
                     pass
         assert len(emu.log.dropped) == 100 - answered
         assert 15 <= len(emu.log.dropped) <= 45  # 30 % of 100, seeded
+
+
+def test_the_tello_emulator_command_answers_on_loopback_and_stops_on_ctrl_c() -> None:
+    port = free_udp_port()
+    proc = subprocess.Popen([sys.executable, "-m", "vlnpilot.cli", "tello-emulator", "--port", str(port),
+                             "--state-port", str(free_udp_port()), "--video-port", str(free_udp_port())],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert f"on 127.0.0.1:{port}" in proc.stdout.readline()  # printed once it listens
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+            s.settimeout(10)
+            s.sendto(b"command", ("127.0.0.1", port))
+            assert s.recvfrom(64)[0] == b"ok"
+            s.sendto(b"takeoff", ("127.0.0.1", port))
+            assert s.recvfrom(64)[0] == b"ok"
+            s.sendto(b"forward 10", ("127.0.0.1", port))
+            assert s.recvfrom(64)[0] == OUT_OF_RANGE.encode()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 0, err
+    assert "stopped" in out
+
+
+def test_the_tello_emulator_command_refuses_an_unknown_spawn_in_one_line() -> None:
+    proc = subprocess.run([sys.executable, "-m", "vlnpilot.cli", "tello-emulator", "--spawn", "garage"],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
+    assert "unknown spawn 'garage'" in proc.stderr
