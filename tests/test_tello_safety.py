@@ -151,6 +151,8 @@ def run_main(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
     (["--pilot", "oracle"], "pilot 'oracle' flies on ground truth"),
     (["--robot", "drone"], "unknown robot 'drone'; valid robots: sim, tello"),
     (["--judge", "maybe"], "unknown judge 'maybe'; valid judges: ask, none"),
+    (["--tello-host", "my-tello"], "--tello-host must be an IP address"),
+    (["--robot", "sim", "--tello-host", "127.0.0.1"], "--tello-host applies to --robot tello only"),
 ])
 def test_bad_tello_options_are_one_line_and_exit_2(monkeypatch, capsys, args, words) -> None:
     base = ["run", "Go to the bedroom", "--robot", "tello", "--pilot", "stdin"]

@@ -116,7 +116,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     robot = check_robot(robot, tello_host)
     shield = shield or DEFAULT_SHIELDS[robot]
     operator = ConsoleOperator()
-    judge_outcome = make_judge(judge, operator) if robot == "tello" else None
+    judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import ipaddress
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -22,6 +23,12 @@ def check_robot(robot: str, tello_host: str | None) -> str:
         raise UnknownNameError("robot", robot, ROBOTS)
     if tello_host is not None and key != "tello":
         raise ConfigError("--tello-host applies to --robot tello only")
+    if tello_host is not None:
+        try:
+            ipaddress.ip_address(tello_host)  # djitellopy matches replies by the sender's address, not a name
+        except ValueError:
+            raise ConfigError(f"--tello-host must be an IP address (a Tello on its own Wi-Fi is 192.168.10.1), "
+                              f"got {tello_host!r}") from None
     return key
 
 
