@@ -13,6 +13,8 @@ from vlnpilot.types import GroundTruth, Observation, Pose
 
 @runtime_checkable
 class Environment(Protocol):
+    """`capabilities` (a `Capabilities`, below) says what it senses; `capabilities_of` reads it, or infers it."""
+
     scene: Scene
 
     def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:

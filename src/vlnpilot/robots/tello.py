@@ -224,7 +224,11 @@ class TelloEnv:
 
     def land(self) -> None:
         if self.flying and self.link is not None:
-            reply = self.link.send("land", self.config.takeoff_timeout_s)
+            reply = None
+            for _ in range(3):  # unlike a move, a repeated `land` is harmless: ask again when the "ok" is lost
+                reply = self.link.send("land", self.config.takeoff_timeout_s)
+                if reply is not None:
+                    break
             self.flying = self.awaiting_operator = False
             self._event("land", reply=reply)
 
