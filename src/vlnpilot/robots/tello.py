@@ -226,7 +226,7 @@ class TelloEnv:
         if self.flying and self.link is not None:
             reply = None
             for _ in range(3):  # unlike a move, a repeated `land` is harmless: ask again when the "ok" is lost
-                reply = self.link.send("land", self.config.takeoff_timeout_s)
+                reply = self.link.send("land")  # the Tello answers once it is down (a few seconds)
                 if reply is not None:
                     break
             self.flying = self.awaiting_operator = False
