@@ -3,9 +3,10 @@
 Starts the emulator on free loopback ports, connects the Tello backend (default settings of tello.yaml:
 video_latency_s 0.8, move_settle_s 0.3, rc pulses 0.5 s + 0.6 s settle), takes off and flies a fixed mix of
 commands, then prints per command class the median and p90 of the step's wall time, the median frame age
-(decode to return) and how many stale frames were dropped, plus the start-up time (connect, video, take-off)
-and the machine. On a real Tello the SDK moves take longer (the drone flies them; ~1-3 s), so these are the
-controller's own overheads: mostly the deliberate wait for a frame decoded after the motion settled.
+(decode to return) and how many stale frames were dropped, the start-up time (connect, video, take-off), how
+far each 10 cm rc pulse really moved the emulated drone, and the machine. On a real Tello the SDK moves take
+longer (the drone flies them; ~1-3 s), so these are the controller's own overheads: mostly the deliberate
+wait for a frame decoded after the motion settled.
 
     .venv/bin/python bench/tello_step_cost.py [--rounds 3]
 """
@@ -49,6 +50,7 @@ def main() -> None:
     timings: dict[str, list[float]] = {}
     ages: dict[str, list[float]] = {}
     dropped: dict[str, list[int]] = {}
+    pulse_errors: list[float] = []
     with TelloEmulator("cabin", emu_cfg, spawn="living_room") as emu:
         host, port = emu.address
         config = load_tello_config(host=host, command_port=port, local_port=free_port(""), state_port=state_port,
@@ -60,9 +62,12 @@ def main() -> None:
             startup = time.perf_counter() - t0
             for _ in range(args.rounds):
                 for code in SEQUENCE:
+                    before = emu.pose
                     t = time.perf_counter()
                     obs = env.step(get_command(code))
                     timings.setdefault(code, []).append(time.perf_counter() - t)
+                    if code in CLASSES["rc pulse (A1/D1/D2)"]:  # how far the timed pulse really flew the drone
+                        pulse_errors.append(abs(emu.pose.distance_xy(before) - get_command(code).amount))
                     ages.setdefault(code, []).append(obs.info["frame_age_s"])
                     dropped.setdefault(code, []).append(obs.info["frames_dropped"])
         finally:
@@ -78,6 +83,8 @@ def main() -> None:
         d = [x for c in codes for x in dropped.get(c, [])]
         print(f"{name:<22} {len(t):>3} {statistics.median(t):>9.2f} {p90(t):>7.2f} "
               f"{statistics.median(a) * 1000:>13.0f} {statistics.median(d):>14.0f}")
+    print(f"rc pulse distance error on the emulator (wall-clock timing over loopback): median "
+          f"{statistics.median(pulse_errors) * 1000:.1f} mm, max {max(pulse_errors) * 1000:.1f} mm of 100 mm")
 
 
 if __name__ == "__main__":
