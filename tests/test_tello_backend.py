@@ -138,3 +138,23 @@ def test_thirty_percent_of_replies_lost_never_repeats_a_move(tmp_path: Path) -> 
     assert halted is None or "not sent again" in str(halted)  # a lost translation reply halts, hovering
     lost = [e for e in env.events if e["event"] == "lost_reply"]
     assert lost and all(e["command"] in intended for e in lost)
+
+
+def test_the_assist_shield_keeps_the_guard_acting_without_ground_truth(scene) -> None:
+    """The Tello's default 'assist': the oscillation guard acts on the map and the pose, with no shield."""
+    from vlnpilot.commands import COMMANDS
+    from vlnpilot.fsm import State
+    from vlnpilot.robots.tello import TelloEnv
+    from vlnpilot.safety import make_safety
+
+    env = TelloEnv(scene, handle_sigint=False)  # never reset: nothing is sent
+    pose = Pose(2.0, 2.0, 1.0, 0.0)
+    codes = ("B1", "C1", "B1", "C1", "B1")
+    executed = {}
+    for name in ("assist", "off"):
+        layer = make_safety(name, env, scene)
+        executed[name] = [layer.filter(i, State.REACH_OBJECT, COMMANDS[c], State.REACH_OBJECT, pose).command.code
+                          for i, c in enumerate(codes, start=1)]
+        assert layer.name == name and layer.shield is None
+    assert executed["off"] == list(codes)
+    assert executed["assist"] != list(codes) and "E" in executed["assist"]  # a reversal vetoed: hover
