@@ -69,13 +69,14 @@ def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,
     from vlnpilot.robots.emulator import TelloEmulator
 
     stop = stop or threading.Event()
-    with TelloEmulator(scene, config, spawn=spawn) as emu:
-        host, port = emu.address
-        say(f"Tello emulator (SDK 2.0) on {host}:{port}: state to port {config.state_port}, H.264 video to port "
-            f"{config.video_port}; drone at spawn {spawn or emu.sim.scene.spawns[0].id} of {emu.sim.scene.name}. "
-            "Fly it with: vln-pilot run \"...\" --robot tello --tello-host 127.0.0.1. Ctrl-C stops it.")
-        try:
+    emu: TelloEmulator | None = None
+    try:  # around the whole block: a Ctrl-C right after the ready line must also stop it cleanly
+        with TelloEmulator(scene, config, spawn=spawn) as emu:
+            host, port = emu.address
+            say(f"Tello emulator (SDK 2.0) on {host}:{port}: state to port {config.state_port}, H.264 video to port "
+                f"{config.video_port}; drone at spawn {spawn or emu.sim.scene.spawns[0].id} of {emu.sim.scene.name}. "
+                "Fly it with: vln-pilot run \"...\" --robot tello --tello-host 127.0.0.1. Ctrl-C stops it.")
             while not stop.wait(0.5):
                 pass
-        except KeyboardInterrupt:
-            say(f"stopped; it executed {len(emu.log.executed)} moves")
+    except KeyboardInterrupt:
+        say(f"stopped; it executed {len(emu.log.executed) if emu else 0} moves")
