@@ -68,6 +68,7 @@ class PilotInput:
     step: int = 0
     profile: str = "paper"  # FSM profile: which moves each state allows
     feedback: tuple[str, ...] = ()  # validation errors of a re-ask, shield and oscillation notes
+    context: tuple[str, ...] = ()  # pilot context beyond the paper (vlnpilot.context): odometry, budget, memory
 
 
 class PilotError(VLNPilotError):
