@@ -229,6 +229,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
+                           "scene_fingerprint": scene.fingerprint(),
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
         })
 
