@@ -16,7 +16,11 @@ The controller validates the answer like any model's and re-asks with the reason
 "Controller feedback" shows it). When the episode ends the pilot writes DIR/done.txt with the outcome line.
 
 No answer within `timeout_s` ends the episode (a fatal PilotError, reason `timeout`): the answerer is gone,
-and re-asking would only wait again. Everything recorded so far is kept.
+and re-asking would only wait again. Everything recorded so far is kept. The pilot is not under the episode's
+step deadline (it waits for people, not a network).
+
+One directory holds one run: a DIR that already holds another run's files is refused (`overwrite=True` deletes
+them). `bench` builds a pilot per episode, so with `files` its second episode is refused: fly rows with `run`.
 """
 
 from __future__ import annotations
@@ -60,13 +64,13 @@ def prepare_directory(directory: Path, overwrite: bool) -> None:
         directory.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=directory, prefix=".write-check-"):
             pass
+        old = run_files(directory)
     except OSError as exc:
         raise ConfigError(f"the files pilot cannot write in {directory}: {exc.strerror or exc}; "
                           "give a writable directory (--pilot files:DIR)") from None
-    old = run_files(directory)
     if old and not overwrite:
         raise ConfigError(f"{directory} already holds the files of another file-pilot run ({old[0].name}, ...); "
-                          "give a fresh directory (--pilot files:NEW_DIR) or the option overwrite=True")
+                          "give a fresh directory (--pilot files:NEW_DIR) or delete them (overwrite=True in Python)")
     for path in old:
         path.unlink(missing_ok=True)
 
