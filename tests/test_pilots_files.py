@@ -193,6 +193,18 @@ def test_a_reask_is_a_new_call_and_a_new_episode_rewrites_the_system_prompt(tmp_
     assert (tmp_path / "latest.txt").read_text() == "003\n"
 
 
+def test_each_file_appears_whole_and_the_prompt_after_the_image(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch) -> None:
+    published: list[tuple[str, str]] = []  # (temp name, final name) of every os.replace, in order
+    real_replace = os.replace
+    monkeypatch.setattr("vlnpilot.pilots.files.os.replace",
+                        lambda src, dst: (published.append((Path(src).name, Path(dst).name)), real_replace(src, dst)))
+    fake = FakeTime({1.0: lambda: (tmp_path / "001.answer.json").write_text(json.dumps(ANSWER))})
+    fake_pilot(tmp_path, fake).decide(pin())
+    assert published == [(".system.md.tmp", "system.md"), (".001.png.tmp", "001.png"),
+                          (".001.prompt.md.tmp", "001.prompt.md"), (".latest.txt.tmp", "latest.txt")]
+
+
 def test_a_directory_with_another_runs_files_is_refused_unless_overwrite(tmp_path: Path) -> None:
     (tmp_path / "004.prompt.md").write_text("old")
     (tmp_path / "004.answer.json").write_text("{}")
