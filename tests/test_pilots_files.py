@@ -182,15 +182,22 @@ def test_a_reask_is_a_new_call_and_a_new_episode_rewrites_the_system_prompt(tmp_
     pilot.decide(pin(step=1))
     answer("002", ANSWER)
     pilot.decide(pin(step=1, feedback=("Your previous answer was rejected: no",)))  # a re-ask: call 002
+    answer("003", ANSWER)
+    pilot.decide(pin(step=1))  # a second call of step 1 without feedback (a confirmation): same episode
     (tmp_path / "system.md").unlink()
     pilot.episode_finished(type("R", (), {"outcome": "success", "steps": 1, "reason": "ok"})())
     assert (tmp_path / "done.txt").read_text() == "success in 1 steps: ok\n"
-    answer("003", ANSWER)
-    pilot.decide(pin(step=1))  # step 1 again without feedback: a new episode
+    answer("004", ANSWER)
+    pilot.decide(pin(step=1))  # after episode_finished: a new episode
+    answer("005", ANSWER)
+    pilot.decide(pin(step=2))
+    answer("006", ANSWER)
+    pilot.decide(pin(step=1))  # steps restart (a caller that does not report the end): a new episode
     assert "Your previous answer was rejected: no" in (tmp_path / "002.prompt.md").read_text()
-    assert ["system.md" in (tmp_path / f"00{n}.prompt.md").read_text() for n in (1, 2, 3)] == [True, False, True]
+    firsts = ["system.md" in (tmp_path / f"00{n}.prompt.md").read_text() for n in range(1, 7)]
+    assert firsts == [True, False, False, True, False, True]
     assert (tmp_path / "system.md").exists() and not (tmp_path / "done.txt").exists()
-    assert (tmp_path / "latest.txt").read_text() == "003\n"
+    assert (tmp_path / "latest.txt").read_text() == "006\n"
 
 
 def test_each_file_appears_whole_and_the_prompt_after_the_image(tmp_path: Path,

@@ -116,16 +116,19 @@ class FilesPilot:
         prepare_directory(self.directory, overwrite)
         self.calls = 0
         self._last_step: int | None = None
+        self._finished = False
 
     def _new_episode(self, pilot_input: PilotInput) -> bool:
-        """Steps restart (or a first call) without the feedback of a re-ask: the controller began an episode."""
-        reask = pilot_input.step == self._last_step and bool(pilot_input.feedback)
-        return self._last_step is None or (pilot_input.step <= self._last_step and not reask)
+        """The first call, the first after `episode_finished`, or steps counting from the start again.
+
+        A second call within one step (a re-ask, a confirmation) stays in the episode, with or without feedback.
+        """
+        return self._last_step is None or self._finished or pilot_input.step < self._last_step
 
     def decide(self, pilot_input: PilotInput) -> Decision:
         prompt = build_prompt(pilot_input)
         first = self._new_episode(pilot_input)
-        self._last_step = pilot_input.step
+        self._last_step, self._finished = pilot_input.step, False
         self.calls += 1
         call = f"{self.calls:03d}"
         if first:
@@ -141,6 +144,7 @@ class FilesPilot:
     def episode_finished(self, result: Any) -> None:
         """Called by run_episode at the end: done.txt tells the answerer that no prompt will follow."""
         line = f"{result.outcome} in {result.steps} steps: {result.reason}\n"
+        self._finished = True
         write_atomic(self.directory / "done.txt", line.encode("utf-8"))
 
     def _write_call(self, call: str, pilot_input: PilotInput, user_text: str, first: bool) -> None:
