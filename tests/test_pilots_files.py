@@ -170,6 +170,16 @@ def test_a_timeout_ends_the_episode_as_pilot_error_and_writes_done(tmp_path: Pat
     assert (tmp_path / "done.txt").read_text().startswith("pilot_error in 1 steps: timeout: no answer in ")
 
 
+def test_a_directory_removed_mid_episode_ends_it_with_a_fatal_pilot_error(tmp_path: Path) -> None:
+    pilot = fake_pilot(tmp_path / "ep", FakeTime())
+    (tmp_path / "ep").rmdir()
+    with pytest.raises(PilotError) as info:
+        pilot.decide(pin())
+    assert info.value.fatal and info.value.reason == "files_unwritable"
+    assert f"cannot write call 001 in {tmp_path / 'ep'}" in str(info.value)
+    pilot.episode_finished(type("R", (), {"outcome": "pilot_error", "steps": 1, "reason": "gone"})())  # no raise
+
+
 # -- numbering, episodes, the directory ------------------------------------------------------------------------
 def test_a_reask_is_a_new_call_and_a_new_episode_rewrites_the_system_prompt(tmp_path: Path) -> None:
     fake = FakeTime()

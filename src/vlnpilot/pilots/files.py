@@ -25,6 +25,7 @@ them). `bench` builds a pilot per episode, so with `files` its second episode is
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import re
@@ -131,10 +132,14 @@ class FilesPilot:
         self._last_step, self._finished = pilot_input.step, False
         self.calls += 1
         call = f"{self.calls:03d}"
-        if first:
-            (self.directory / "done.txt").unlink(missing_ok=True)
-            write_atomic(self.directory / "system.md", prompt.system.encode("utf-8"))
-        self._write_call(call, pilot_input, prompt.user_text(), first)
+        try:
+            if first:
+                (self.directory / "done.txt").unlink(missing_ok=True)
+                write_atomic(self.directory / "system.md", prompt.system.encode("utf-8"))
+            self._write_call(call, pilot_input, prompt.user_text(), first)
+        except OSError as exc:  # DIR deleted or full mid-episode: nobody can answer, so end the episode
+            raise PilotError(f"the files pilot cannot write call {call} in {self.directory}: {exc.strerror or exc}",
+                             fatal=True, reason="files_unwritable") from None
         t0 = self.clock()
         text = self._wait_for_answer(self.directory / f"{call}.answer.json")
         latency = self.clock() - t0
@@ -145,7 +150,8 @@ class FilesPilot:
         """Called by run_episode at the end: done.txt tells the answerer that no prompt will follow."""
         line = f"{result.outcome} in {result.steps} steps: {result.reason}\n"
         self._finished = True
-        write_atomic(self.directory / "done.txt", line.encode("utf-8"))
+        with contextlib.suppress(OSError):  # DIR gone: the recording still holds the outcome
+            write_atomic(self.directory / "done.txt", line.encode("utf-8"))
 
     def _write_call(self, call: str, pilot_input: PilotInput, user_text: str, first: bool) -> None:
         image = self.directory / f"{call}.png"
