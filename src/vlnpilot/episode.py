@@ -335,7 +335,15 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                          "safety": {"shield": safety.name,
                                     "interventions": [i.to_dict() for i in safety.interventions],
                                     "oscillation_events": [e.to_dict() for e in safety.events]}})
+    _tell_pilot_the_outcome(pilot, result)
     return result
+
+
+def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
+    """A pilot with an `episode_finished(result)` method learns the outcome (the files pilot writes done.txt)."""
+    finished = getattr(pilot, "episode_finished", None)
+    if callable(finished):
+        finished(result)
 
 
 def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,

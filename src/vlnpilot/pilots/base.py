@@ -112,7 +112,8 @@ def register_pilot(name: str) -> Callable[[PilotFactory], PilotFactory]:
 
 
 _BUILTIN_MODULES = {"oracle": "oracle", "openai": "openai", "gemini": "gemini", "anthropic": "anthropic",
-                    "remote": "remote", "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy"}
+                    "remote": "remote", "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy",
+                    "files": "files"}
 
 
 def _load_builtin_pilots(only: str | None = None) -> None:
