@@ -25,7 +25,8 @@ CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends t
                 "otherwise choose another state and movement.")
 _CONFIRM_WHY = {
     State.STAY_ON_ROOM: " (the drone is inside the goal room, well past the door it came through)",
-    State.DESCRIBE_OBJECT: " (the object is close enough by the stop rule of Reach Object)",
+    State.DESCRIBE_OBJECT: " (measure again how much of the image width the whole object spans: the stop rule of "
+                           "Reach Object)",
 }
 
 
@@ -126,7 +127,7 @@ class PilotContext:
             out.append(f"Step budget: this is step {step} of {self.max_steps}; {self.max_steps - step} steps "
                        "remain after this one.")
         if c.odometry:
-            out.append(f"Odometry since the current state began: {self._in_state.text()}.")
+            out.append(f"Odometry in the current state (it restarts at every state change): {self._in_state.text()}.")
             if self._since_door is None:
                 out.append("Odometry since the last door crossing began (entering Go Through Door): no door "
                            "crossed yet.")
