@@ -32,8 +32,8 @@ TABLE_4 = {
     ("bedroom", "Go to the living room/kitchen"): 20,
     ("bedroom", "Find the mirror in the bedroom"): 10,
     ("bathroom", "Go to the bathroom"): 1,
-    ("bathroom", "Go to the living room/kitchen"): 33,
-    ("bathroom", "Find the sink in the bathroom"): 9,
+    ("bathroom", "Go to the living room/kitchen"): 32,
+    ("bathroom", "Find the sink in the bathroom"): 7,
 }
 ROWS = list(TABLE_4)
 
