@@ -233,6 +233,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
         })
 
+    _tell_pilot_the_episode(pilot, scene, config)
     pilot_context = PilotContext(config.context, config.max_steps)
     steps = 0
     bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
@@ -337,6 +338,13 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                                     "oscillation_events": [e.to_dict() for e in safety.events]}})
     _tell_pilot_the_outcome(pilot, result)
     return result
+
+
+def _tell_pilot_the_episode(pilot: Pilot, scene: Any, config: EpisodeConfig) -> None:
+    """A pilot with an `episode_started(scene, config)` method sees them first (the replay pilot checks them)."""
+    started = getattr(pilot, "episode_started", None)
+    if callable(started):
+        started(scene, config)
 
 
 def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
