@@ -98,6 +98,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         shield: Annotated[str | None, typer.Option(
             "--shield", help="off, geometry, depth or assist (default: geometry; with a Tello: assist).")] = None,
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
+        context: Annotated[str, typer.Option("--context", help="Pilot context: paper (the paper's five inputs) "
+                                             "or plus (odometry, budget, memory, confirmation).")] = "paper",
         robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator) or tello.")] = "sim",
         tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
         judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
@@ -122,7 +124,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
     task = parse_query(query, sc)
-    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay)
+    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
+                           context=context)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
@@ -207,11 +210,14 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           shield: Annotated[str, typer.Option("--shield", help="off, geometry or depth.")] = "geometry",
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
+          context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True) -> None:
     """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report."""
     from vlnpilot.bench.command import bench_command
 
-    options = {"overlay": overlay} if overlay else {}
+    options: dict[str, str] = {"overlay": overlay} if overlay else {}
+    if context != "paper":
+        options["context"] = context
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=base_url, shield=shield, episode_options=options)

@@ -155,3 +155,12 @@ def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]
             except json.JSONDecodeError:
                 break
     return summary, steps
+
+
+TRIAL = "trial.json"  # beside a trial's summary.json: who flew it, when, how (see trials/README.md)
+
+
+def load_trial(run_dir: str | Path) -> dict[str, Any]:
+    """A trial's metadata (trial.json), or {} for a plain run."""
+    path = Path(run_dir) / TRIAL
+    return json.loads(path.read_text()) if path.is_file() else {}
