@@ -252,8 +252,12 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite
 @app.command("serve")
 def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
           port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8000,
-          pilot: Annotated[str | None, typer.Option("--pilot", help="Default pilot SPEC.")] = None) -> None:
-    """Serve pilots over HTTP (POST /v1/decide, GET /healthz, OpenAPI at /docs); VLN_PILOT_TOKEN sets a bearer token."""
+          pilot: Annotated[str | None, typer.Option("--pilot", help="Default pilot SPEC.")] = None,
+          allow: Annotated[list[str] | None, typer.Option("--allow", help="Another pilot SPEC clients may ask for "
+                                                          "(repeatable); nothing else is served.")] = None) -> None:
+    """Serve pilots over HTTP (POST /v1/decide, GET /healthz, OpenAPI at /docs); VLN_PILOT_TOKEN sets a bearer token.
+
+    Only --pilot and the --allow SPECs are served; off loopback a token is required."""
     from vlnpilot.server.app import serve as run_server
 
     if pilot is None:
@@ -261,7 +265,7 @@ def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
         if pilot == "oracle":  # the oracle needs the simulator's ground truth, which a server does not have
             pilot, why = "openai", "the default model pilot; set OPENAI_API_KEY"
         console.print(f"default pilot: [bold]{pilot}[/bold] ({why})")
-    run_server(host=host, port=port, pilot_spec=pilot)
+    run_server(host=host, port=port, pilot_spec=pilot, allowed_pilots=allow or [])
 
 
 def main() -> None:

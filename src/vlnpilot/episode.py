@@ -2,7 +2,8 @@
 
 Each step: observe, ask the pilot, validate the decision against the FSM (is the movement allowed in this
 state? is the transition allowed?), execute, update the FSM, check termination. An invalid decision is
-never executed: the pilot is re-asked with the validation error (at most `max_reasks` times), then the
+never executed: the pilot is re-asked with the validation error (at most `max_reasks` times; a transient
+provider failure, already retried by the SDK, is not re-asked and not told to the model), then the
 drone hovers (E) and the step counts an invalid decision.
 
 Between the validated decision and the drone sits the safety layer (`vlnpilot.safety`, `EpisodeConfig.shield`):
@@ -14,8 +15,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
-from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -23,6 +22,8 @@ from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.environment import Environment
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
+from vlnpilot.pilots._common import TRANSIENT_REASONS
+from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
 from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
 from vlnpilot.record import Recorder, git_sha, package_versions
@@ -144,38 +145,39 @@ def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> _Answer:
 
 
 class _Deadline:
-    """Runs pilot calls in a helper thread so that a step can stop waiting when its deadline passes.
+    """Runs pilot calls in a helper (daemon) thread so that a step can stop waiting when its deadline passes.
 
-    A call still running at the deadline is abandoned (the provider SDK's own timeout ends it later) and
-    the next call gets a fresh thread, so a hung request never blocks the episode.
+    A call still running at the deadline is abandoned and cancelled (`cancel_pending`: its SDK sends no further
+    request, retries included), and the next call gets a fresh thread, so a hung request never blocks the
+    episode, never calls the provider after the episode, and never holds up the process's exit.
     """
 
-    def __init__(self, seconds: float | None):
+    def __init__(self, seconds: float | None, pilot: Pilot | None = None):
         self.seconds = seconds
-        self._pool: ThreadPoolExecutor | None = None
+        self._pilot = pilot
 
     def ask(self, pilot: Pilot, pin: PilotInput, state: State, profile: str, remaining_s: float) -> _Answer:
         if self.seconds is None:
             return _ask(pilot, pin, state, profile)
         if remaining_s <= 0:
             return self.expired()
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pilot-call")
-        future = self._pool.submit(_ask, pilot, pin, state, profile)
-        try:
-            return future.result(timeout=remaining_s)
-        except FutureTimeout:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        finished, answer = call_in_daemon_thread(lambda: _ask(pilot, pin, state, profile), remaining_s)
+        if not finished:
+            self._cancel()
             return self.expired()
+        return answer
+
+    def _cancel(self) -> None:
+        cancel = getattr(self._pilot, "cancel_pending", None)
+        if callable(cancel):
+            cancel()
 
     def expired(self) -> _Answer:
         return _Answer(None, f"step_deadline: no valid answer within the step deadline of {self.seconds:g} s",
                        kind="step_deadline")
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        self._cancel()  # the episode is over: nothing may call the provider for it any more
 
 
 def _reseed(pilot: Pilot, seed: int | None) -> None:
@@ -223,7 +225,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
 
     steps = 0
     bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
-    deadline = _Deadline(config.step_deadline_s if bounded else None)
+    deadline = _Deadline(config.step_deadline_s if bounded else None, pilot)
     for step in range(1, config.max_steps + 1):
         steps = step
         feedback: list[str] = list(notes)
@@ -244,8 +246,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                 break
             failures.append({"attempt": attempt, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
                              "raw_text": answer.raw_text})
-            if fatal or answer.kind == "step_deadline":
-                break
+            if fatal or answer.kind == "step_deadline" or answer.kind in TRANSIENT_REASONS:
+                break  # re-ask only an unusable answer; a transient failure is the transport's, not the model's
             why = answer.hint or f"{answer.error}. Answer again with valid values."
             feedback = [*notes, f"Your previous answer was rejected: {why}"]
 

@@ -20,6 +20,7 @@ from typing import Any, ClassVar, Literal, TypeVar
 
 from vlnpilot import pricing
 from vlnpilot.errors import ConfigError
+from vlnpilot.pilots._gate import CallGate
 from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage
 
 log = logging.getLogger(__name__)
@@ -299,6 +300,7 @@ class ModelPilot:
             self._prices = prices
         else:
             self._prices = pricing.load_prices(prices)
+        self._gate = CallGate()  # subclasses hook it into their SDK's HTTP client (see cancel_pending)
         self.price_known = pricing.find_price(self.model, self._prices) is not None
         if not self.price_known and (self.provider, self.model) not in _UNPRICED_WARNED:
             _UNPRICED_WARNED.add((self.provider, self.model))  # once per model and process, not per pilot
@@ -308,11 +310,23 @@ class ModelPilot:
     def __repr__(self) -> str:  # never the key: the SDK client holds it, not us
         return f"{type(self).__name__}(model={self.model!r}, timeout={self.timeout:g})"
 
+    def cancel_pending(self) -> None:
+        """Abandon the calls in flight: no further HTTP request of theirs (SDK retries included) is sent."""
+        self._gate.cancel()
+
+    def close(self) -> None:
+        """Cancel what is in flight and close the SDK client (its connection pool)."""
+        self.cancel_pending()
+        close = getattr(getattr(self, "_client", None), "close", None)
+        if callable(close):
+            close()
+
     # -- the skeleton
     def decide(self, pilot_input: PilotInput) -> Decision:
         from vlnpilot.prompting import build_prompt
 
         prompt = build_prompt(pilot_input, jpeg_quality=self.jpeg_quality, max_side=self.max_side)
+        self._gate.enter()
         t0 = time.perf_counter()
         try:
             reply = self._call(prompt)
