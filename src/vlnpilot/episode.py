@@ -22,6 +22,7 @@ from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.environment import Environment
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
+from vlnpilot.overrides import override_reason
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
@@ -271,8 +272,9 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         path.update(pose_before, obs.pose)
         reversal = osc.update(command)
         room_now = gt.room() if gt is not None else None
+        override = override_reason(state, config.profile, command, decision is None, verdict.interventions)
         _record(recorder, on_step, step, state, decision, failures, command, next_state, obs, pose_before,
-                room_now, reversal, verdict)
+                room_now, reversal, verdict, override)
         previous = command.code
 
         if obs.collided:
@@ -313,7 +315,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
 def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,
             decision: Decision | None, failures: list[dict[str, Any]], command: Command | None,
             next_state: State | None, obs: Observation, pose_before: Pose, room_now: str | None,
-            reversal: bool | None, verdict: SafetyVerdict | None = None) -> None:
+            reversal: bool | None, verdict: SafetyVerdict | None = None, override: str | None = None) -> None:
     record: dict[str, Any] = {
         "step": step,
         "state": state.value,
@@ -324,6 +326,7 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
         "failures": failures,
         "proposed": decision.movement if decision else None,
         "executed": command.code if command else None,
+        "override": override,  # why an executed command outside the state's allowed moves ran (vlnpilot.overrides)
         "next_state": next_state.value if next_state else None,
         "pose_before": pose_before.as_dict(),
         "pose_after": obs.pose.as_dict(),

@@ -157,7 +157,10 @@ class Recorder:
         write_json_atomic(self.run_dir / SUMMARY, self._summary)
 
     def step(self, record: dict[str, Any]) -> None:
-        record = {**record, "raw_text": cap_text(record.get("raw_text")),
+        decision = record.get("decision")
+        if isinstance(decision, dict) and isinstance(decision.get("description"), str):
+            decision = {**decision, "description": cap_text(decision["description"])}
+        record = {**record, "decision": decision, "raw_text": cap_text(record.get("raw_text")),
                   "failures": [{**f, "raw_text": cap_text(f.get("raw_text"))} for f in record.get("failures") or []]}
         self._episode.write(json.dumps(_jsonable(record)) + "\n")
         self._episode.flush()
