@@ -133,3 +133,16 @@ def test_wilson_bounds_always_hold_the_rate_so_plots_never_get_negative_error_ba
 
     path = plot_success_rates(["oracle", "noisy"], [10, 0], [10, 10], tmp_path / "rates.png")
     assert path.is_file() and path.stat().st_size > 0
+
+
+def test_the_stdin_pilot_leaves_no_temporary_directory(tmp_path: Path) -> None:
+    import os
+    import subprocess
+
+    env = {**{k: v for k, v in os.environ.items() if k not in KEYS}, "TMPDIR": str(tmp_path)}
+    done = subprocess.run([sys.executable, "-m", "vlnpilot.cli", "run", "Go to the bedroom", "--pilot", "stdin",
+                           "--no-video", "-q", "--out", str(tmp_path / "r")], stdin=subprocess.DEVNULL,
+                          capture_output=True, text=True, env=env, timeout=120)
+    assert done.returncode == PILOT_ERROR, done.stderr  # stdin closed at once: a pilot error
+    assert "image: " + str(tmp_path) in done.stderr  # the images went to the temporary folder...
+    assert not list(tmp_path.glob("vlnpilot-stdin-*"))  # ...and are gone at the end
