@@ -67,8 +67,8 @@ def main() -> None:
         rows.append((d_rss, d_fds, t_med))
         print(f"rep {rep}: {args.requests} distinct pilot names -> statuses {sorted(statuses)}, "
               f"RSS {d_rss:+.1f} MB, open files {d_fds:+d}, median refusal {1000 * t_med:.2f} ms")
-    print(f"median over {args.reps}: RSS {statistics.median(r[0] for r in rows):+.1f} MB, open files "
-          f"{statistics.median(r[1] for r in rows):+.0f}, refusal {1000 * statistics.median(r[2] for r in rows):.2f} ms")
+    rss, fds, refusal = (statistics.median(r[i] for r in rows) for i in range(3))
+    print(f"median over {args.reps}: RSS {rss:+.1f} MB, open files {fds:+.0f}, refusal {1000 * refusal:.2f} ms")
 
 
 if __name__ == "__main__":

@@ -146,3 +146,31 @@ def test_the_stdin_pilot_leaves_no_temporary_directory(tmp_path: Path) -> None:
     assert done.returncode == PILOT_ERROR, done.stderr  # stdin closed at once: a pilot error
     assert "image: " + str(tmp_path) in done.stderr  # the images went to the temporary folder...
     assert not list(tmp_path.glob("vlnpilot-stdin-*"))  # ...and are gone at the end
+
+
+SMALL_SUITE = """name: small
+scene: cabin
+repetitions: 1
+max_steps: 2
+seed: 0
+rows:
+  - id: bed
+    spawn: living_room
+    query: Go to the bedroom
+    goal: {room: bedroom}
+"""
+
+
+@pytest.mark.parametrize(("pilot", "code"), [("oracle", 0), ("openai", PILOT_ERROR)])
+def test_bench_exits_non_zero_when_an_episode_ended_in_pilot_error(monkeypatch, capsys, tmp_path, pilot,
+                                                                    code) -> None:
+    suite = tmp_path / "small.yaml"
+    suite.write_text(SMALL_SUITE)
+    with FakeOpenAI() as fake:
+        fake.push("bad_key", times=5)
+        monkeypatch.setattr(sys, "argv", ["vln-pilot", "bench", "--suite", str(suite), "--pilots", pilot,
+                                          "--base-url", fake.base_url, "--no-report", "--out", str(tmp_path / "b")])
+        monkeypatch.setenv("OPENAI_API_KEY", "sk-not-a-real-key-0000")
+        with pytest.raises(SystemExit) as info:
+            cli.main()
+    assert info.value.code == code
