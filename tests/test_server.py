@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import io
+import re
 
 import pytest
 import schemathesis
@@ -17,7 +18,7 @@ from fakes.scripted import INSTANCES
 from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import PilotError, Usage
 from vlnpilot.server import create_app
-from vlnpilot.server.app import decode_image
+from vlnpilot.server.app import IMAGE_PATTERN, decode_image
 
 TOKEN = "server-token-abc123"
 
@@ -241,17 +242,34 @@ def test_openai_pilot_behind_the_server_against_the_fake():
 # ---------------------------------------------------------------------------------------------- schemathesis
 # Every generated request must get a documented status and a body matching the documented schema, never a
 # 5xx. The schema's `image` pattern (base64 starting like a JPEG or PNG) makes "0" and other non-images
-# schema-invalid; `positive_data_acceptance` is still left out because a pattern-valid string may be a truncated
-# JPEG, which JSON Schema cannot express, so the server rightly answers 422 to it.
+# schema-invalid. A pattern-valid string may still be a truncated JPEG, which JSON Schema cannot express, so
+# positive_data_acceptance (every schema-valid request accepted) runs in a second pass whose hook gives positive
+# bodies a real JPEG; that pass skips the coverage phase, which bypasses hooks.
 
 _st_app = create_app(pilot_spec="test-scripted", token=TOKEN, max_body_bytes=200_000)
 _schema = schemathesis.openapi.from_asgi("/openapi.json", _st_app)
+_positive = schemathesis.openapi.from_asgi("/openapi.json", _st_app)
+_positive.config.phases.coverage.enabled = False
+_VALID_IMAGE = re.compile(IMAGE_PATTERN)
+
+
+@_positive.hook
+def map_body(ctx, body):
+    if isinstance(body, dict) and isinstance(body.get("image"), str) and _VALID_IMAGE.match(body["image"]):
+        body = {**body, "image": _b64(size=(8, 6))}
+    return body
 
 
 @_schema.parametrize()
 @settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
 def test_schemathesis(case):
     case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, excluded_checks=[positive_data_acceptance])
+
+
+@_positive.parametrize()
+@settings(max_examples=25, deadline=None, suppress_health_check=list(HealthCheck), derandomize=True)
+def test_schemathesis_accepts_every_schema_valid_request(case):
+    case.call_and_validate(headers={"Authorization": f"Bearer {TOKEN}"}, checks=[positive_data_acceptance])
 
 
 def test_serve_runs_uvicorn_with_the_env_token(monkeypatch):

@@ -23,14 +23,14 @@ import logging
 import os
 import re
 from collections.abc import AsyncIterator, Callable, Collection
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from vlnpilot.commands import COMMANDS, get_command
@@ -66,6 +66,14 @@ CommandCode = Literal[tuple(COMMANDS)]  # type: ignore[valid-type]
 Profile = Literal[PROFILES]  # type: ignore[valid-type]
 
 
+def _whole_float_to_int(value: Any) -> Any:
+    """JSON Schema's "integer" includes 7.0; strict pydantic would refuse it, so the two disagreed."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+WholeNumber = Annotated[int, BeforeValidator(_whole_float_to_int)]
+
+
 class DecideRequest(BaseModel):
     """One step's inputs (the paper's five, plus the FSM profile, controller feedback and the pilot to ask)."""
 
@@ -84,7 +92,7 @@ class DecideRequest(BaseModel):
     profile: Profile = Field(default="paper", description="FSM profile: which moves each state allows")
     feedback: list[str] = Field(default_factory=list, description="controller feedback lines for a re-ask",
                                 max_length=20)
-    step: int = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
+    step: WholeNumber = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
     pilot: str | None = Field(default=None, description="pilot SPEC (name or name:model); default: the server's",
                               max_length=200)
 
