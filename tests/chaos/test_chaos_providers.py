@@ -145,3 +145,39 @@ def test_a_huge_valid_reply_is_too_long_not_json_and_is_recorded_capped(geo_sim,
     assert "1000" in failures[0]["reason"] and "characters" in failures[0]["reason"]
     assert failures[0]["raw_text"].endswith(f"[cut: {len(huge)} characters in all]")
     assert (tmp_path / "run" / "episode.jsonl").stat().st_size < 50_000  # not 3 MB
+
+
+HANGING_EPISODE = """
+import sys
+sys.path.insert(0, sys.argv[1])
+from fakes import FakeOpenAI
+from vlnpilot.episode import EpisodeConfig, run_episode
+from vlnpilot.pilots.base import make_pilot
+from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.tasks import parse_query
+
+fake = FakeOpenAI().start()  # left running: its hung answers would keep an abandoned call waiting
+fake.push("hang", times=20, seconds=600.0)
+pilot = make_pilot("openai:gpt-4.1", base_url=fake.base_url, api_key="sk-not-a-real-key-0000", timeout=300)
+with Simulator("cabin", SimConfig(render=False)) as sim:
+    result = run_episode(sim, pilot, parse_query("Go to the bedroom", sim.scene),
+                         EpisodeConfig(max_steps=1, step_deadline_s=0.2), spawn="living_room")
+print(result.outcome, len(fake.requests), flush=True)
+"""
+
+
+def test_the_process_exits_at_once_although_a_call_still_hangs(tmp_path) -> None:
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = tmp_path / "hang.py"
+    script.write_text(HANGING_EPISODE)
+    proc = subprocess.Popen([sys.executable, str(script), str(Path(__file__).parents[1])], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = proc.communicate(timeout=120)  # the hung call would hold a non-daemon thread for 300 s
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert out.split() == ["max_steps", "1"]
