@@ -3,12 +3,13 @@ SDKs against the fake servers on 127.0.0.1."""
 
 from __future__ import annotations
 
+import contextlib
 import json
 import threading
 
 import pytest
 
-from fakes import FakeGemini, FakeOpenAI, sample_input
+from fakes import FakeAnthropic, FakeGemini, FakeOpenAI, ServerThread, sample_input
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots.base import PilotError, make_pilot
@@ -16,6 +17,7 @@ from vlnpilot.pilots.gemini import GeminiPilot
 from vlnpilot.pilots.openai import OpenAIPilot
 from vlnpilot.prompting import build_prompt
 from vlnpilot.record import Recorder, load_run
+from vlnpilot.server import create_app
 from vlnpilot.tasks import parse_query
 
 pytestmark = pytest.mark.chaos
@@ -115,17 +117,26 @@ def test_a_transient_failure_is_not_re_asked_nor_told_to_the_model(geo_sim) -> N
     assert not any("rate_limited" in t or "rejected" in t for t in texts)
 
 
-def test_abandoned_calls_send_nothing_after_the_episode(geo_sim) -> None:
-    with FakeOpenAI() as fake:
+@pytest.mark.parametrize("provider", ["openai", "gemini", "anthropic", "remote"])
+def test_abandoned_calls_send_nothing_after_the_episode(geo_sim, provider) -> None:
+    fakes = {"openai": FakeOpenAI, "gemini": FakeGemini, "anthropic": FakeAnthropic, "remote": FakeOpenAI}
+    with fakes[provider]() as fake, contextlib.ExitStack() as stack:
         fake.push("hang", times=20, seconds=5.0)
-        pilot = openai(fake, timeout=0.5, max_retries=2)
+        if provider == "remote":  # our server in a thread, in front of the fake: the hang reaches the client
+            app = create_app(pilot_spec="openai:gpt-4.1", pilot_options={"base_url": fake.base_url, "api_key": KEY,
+                                                                          "timeout": 4.0, "max_retries": 0})
+            url = stack.enter_context(ServerThread(app))
+            pilot = make_pilot("remote", url=url, timeout=0.5, max_retries=2, retry_base_delay=0.01)
+        else:
+            key = {"gemini": "AIza-not-a-real-key"}.get(provider, KEY)
+            pilot = make_pilot(provider, base_url=fake.base_url, api_key=key, timeout=0.5, max_retries=2)
         result = run_episode(geo_sim, pilot, parse_query("Go to the bedroom", geo_sim.scene),
                              EpisodeConfig(max_steps=2, step_deadline_s=0.2), spawn="living_room")
         at_end = len(fake.requests)
         calls = [t for t in threading.enumerate() if t.name == "pilot-call"]
         assert calls and all(t.daemon for t in calls)  # never holds up the process's exit
         for t in calls:
-            t.join(timeout=30)  # the abandoned calls end (SDK timeout, then their retries are refused)
+            t.join(timeout=30)  # the abandoned calls end (time-out, then their retries are refused)
         assert not any(t.is_alive() for t in calls)
         after = len(fake.requests)
     assert result.invalid_decisions == 2
