@@ -124,3 +124,16 @@ def test_wrong_content_type_is_415_naming_the_expected_type() -> None:
     for response in (form, text):
         assert response.status_code == 415 and "application/json" in response.json()["detail"]
 
+
+
+def test_serve_allow_names_the_extra_specs(monkeypatch, capsys) -> None:
+    import uvicorn
+
+    apps = []
+    monkeypatch.setattr(uvicorn, "run", lambda app, **kw: apps.append(app))
+    monkeypatch.setattr(sys, "argv", ["vln-pilot", "serve", "--pilot", "test-scripted", "--allow", "test-scripted:v2",
+                                      "--allow", "openai:gpt-4.1-mini"])
+    with pytest.raises(SystemExit) as info:
+        cli.main()
+    assert info.value.code == 0
+    assert apps[0].state.pilots.allowed == ["test-scripted", "test-scripted:v2", "openai:gpt-4.1-mini"]
