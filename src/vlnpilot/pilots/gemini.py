@@ -49,7 +49,8 @@ _MEDIA_RESOLUTIONS = {"low": "MEDIA_RESOLUTION_LOW", "medium": "MEDIA_RESOLUTION
 
 @dataclass(frozen=True)
 class Thinking:
-    """The thinking budgets a model family accepts (Gemini API docs, "Thinking"; checked 2026-11-22)."""
+    """The thinking budgets a model family accepts, per the Gemini API's "Thinking" guide (as of 2025; not
+    re-checked from this offline machine: a provider's 400 still names what it refuses)."""
 
     can_disable: bool  # thinking_budget=0 is valid
     min_budget: int
