@@ -57,11 +57,10 @@ class ReplayPilot:
             raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
                               f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}")
         recorded = self.summary.get("config", {})
-        now = {"max_steps": config.max_steps, "profile": config.profile, "shield": config.shield,
-               "context": context_name(config.context)}
+        # What decides the outcome of the same answers (a longer step limit only runs the recording out).
+        now = {"profile": config.profile, "shield": config.shield, "context": context_name(config.context)}
         context = (recorded.get("context") or {}).get("preset", "paper")  # recordings before contexts: paper
-        then = {"max_steps": recorded.get("max_steps"), "profile": recorded.get("profile"),
-                "shield": recorded.get("shield"), "context": context}
+        then = {"profile": recorded.get("profile"), "shield": recorded.get("shield"), "context": context}
         differ = [f"--{key.replace('_', '-')} {then[key]}" for key in now
                   if then[key] is not None and str(then[key]) != str(now[key])]
         if differ:
@@ -128,12 +127,12 @@ class ReplayPilot:
 
 def _recording(source: Path, row: str | None) -> Path:
     """A run directory, or a set of trials (one recording per suite row: SET/ROW/) and the row to replay."""
-    if (source / "summary.json").is_file() or not source.is_dir():
+    trials = sorted(p.name for p in source.iterdir() if (p / "summary.json").is_file()) if source.is_dir() else []
+    if (source / "summary.json").is_file() or not trials:
         return source  # load_run explains a missing recording
     if row is None:
         raise ConfigError(f"{source} is a set of trials: replay it with its suite, e.g. vln-pilot bench --suite "
                           f"{source}/suite.yaml --pilots replay:{source}, or give one trial: replay:{source}/ROW")
-    if not (source / row / "summary.json").is_file():
-        rows = sorted(p.name for p in source.iterdir() if (p / "summary.json").is_file())
-        raise ConfigError(f"{source} has no trial for row {row!r}; its trials: {', '.join(rows) or 'none'}")
+    if row not in trials:
+        raise ConfigError(f"{source} has no trial for row {row!r}; its trials: {', '.join(trials)}")
     return source / row
