@@ -1,10 +1,11 @@
 """The prompts' visual rules agree with the success monitor: rendered, not assumed.
 
 Reach Object tells the pilot that an object is within the success distance only when it spans at least
-OBJECT_CLOSE_WIDTH_FRACTION of the image width (a visible floor in front of it would put it beyond 2 m). Here every target is
-rendered on its facing axis well inside the monitor's success distance, just beyond it and at twice it: the stated
-rule must hold at the first and fail at the others. A change of threshold, camera or furniture that breaks the agreement fails here
-(doubling `SuccessConfig.object_distance_m` without touching the prompts does).
+OBJECT_CLOSE_WIDTH_FRACTION of the image width (a visible floor in front of it would put it beyond 2 m). Here
+every target is rendered on its facing axis well inside the monitor's success distance, just beyond it and at
+twice it: the stated rule must hold at the first and fail at the others. A change of threshold, camera or
+furniture that breaks the agreement fails here (doubling `SuccessConfig.object_distance_m` without touching the
+prompts does).
 """
 
 from __future__ import annotations

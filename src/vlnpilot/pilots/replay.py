@@ -41,9 +41,11 @@ class ReplayPilot:
                               "(or make_pilot('replay', run_dir=...))")
         self.run_dir = _recording(Path(source), row)
         self.strict = strict
-        summary, steps = load_run(self.run_dir)
-        self.summary = summary
-        self.trial = load_trial(self.run_dir)
+        if self.run_dir is None:  # a set of trials without a row: the bench checks the spec once this way
+            self.run_dir, self.summary, self.trial, steps = Path(source), {}, {}, []
+        else:
+            self.summary, steps = load_run(self.run_dir)
+            self.trial = load_trial(self.run_dir)
         self.steps: dict[int, dict[str, Any]] = {int(rec["step"]): rec for rec in steps if "step" in rec}
         self.model = f"replay:{self.run_dir}"
         self._step: int | None = None
@@ -51,17 +53,20 @@ class ReplayPilot:
 
     def episode_started(self, scene: Any, config: Any) -> None:
         """Refuse to replay on another scene or with other settings: the outcome could not be reproduced."""
+        if not self.summary:
+            raise ConfigError(f"{self.run_dir} is a set of trials: replay it with its suite, e.g. vln-pilot bench "
+                              f"--suite {self.run_dir}/suite.yaml --pilots replay:{self.run_dir}, or give one trial: "
+                              f"replay:{self.run_dir}/ROW")
         flown = self.trial.get("scene") or self.summary.get("scene")
         mark = self.trial.get("scene_fingerprint") or self.summary.get("provenance", {}).get("scene_fingerprint")
         if flown != scene.name or (mark is not None and mark != scene.fingerprint()):
             raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
                               f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}")
         recorded = self.summary.get("config", {})
-        now = {"max_steps": config.max_steps, "profile": config.profile, "shield": config.shield,
-               "context": context_name(config.context)}
+        # What decides the outcome of the same answers (a longer step limit only runs the recording out).
+        now = {"profile": config.profile, "shield": config.shield, "context": context_name(config.context)}
         context = (recorded.get("context") or {}).get("preset", "paper")  # recordings before contexts: paper
-        then = {"max_steps": recorded.get("max_steps"), "profile": recorded.get("profile"),
-                "shield": recorded.get("shield"), "context": context}
+        then = {"profile": recorded.get("profile"), "shield": recorded.get("shield"), "context": context}
         differ = [f"--{key.replace('_', '-')} {then[key]}" for key in now
                   if then[key] is not None and str(then[key]) != str(now[key])]
         if differ:
@@ -126,14 +131,13 @@ class ReplayPilot:
         raise PilotError(message or reason, fatal=False, reason=kind if message else "pilot_error")
 
 
-def _recording(source: Path, row: str | None) -> Path:
-    """A run directory, or a set of trials (one recording per suite row: SET/ROW/) and the row to replay."""
-    if (source / "summary.json").is_file() or not source.is_dir():
+def _recording(source: Path, row: str | None) -> Path | None:
+    """A run directory, or for a set of trials (one recording per suite row: SET/ROW/) the row's (None: no row)."""
+    trials = sorted(p.name for p in source.iterdir() if (p / "summary.json").is_file()) if source.is_dir() else []
+    if (source / "summary.json").is_file() or not trials:
         return source  # load_run explains a missing recording
     if row is None:
-        raise ConfigError(f"{source} is a set of trials: replay it with its suite, e.g. vln-pilot bench --suite "
-                          f"{source}/suite.yaml --pilots replay:{source}, or give one trial: replay:{source}/ROW")
-    if not (source / row / "summary.json").is_file():
-        rows = sorted(p.name for p in source.iterdir() if (p / "summary.json").is_file())
-        raise ConfigError(f"{source} has no trial for row {row!r}; its trials: {', '.join(rows) or 'none'}")
+        return None
+    if row not in trials:
+        raise ConfigError(f"{source} has no trial for row {row!r}; its trials: {', '.join(trials)}")
     return source / row

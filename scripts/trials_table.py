@@ -1,0 +1,61 @@
+"""The real-VLM trials as tables: outcomes per set (the README's before/after table) and one line per trial.
+
+    python scripts/trials_table.py [trials]            # markdown on stdout
+
+Reads only trials/SET/ROW/trial.json, so every figure in the README comes from the committed trials.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+from vlnpilot.bench.results import wilson_interval
+
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
+LABELS = {"baseline": "before (baseline)", "after-paper": "after, paper context", "after-plus": "after, plus context"}
+
+
+def load(root: Path) -> dict[str, list[dict]]:
+    sets: dict[str, list[dict]] = defaultdict(list)
+    for path in sorted(root.glob("*/*/trial.json")):
+        sets[path.parent.parent.name].append({"row": path.parent.name, **json.loads(path.read_text())})
+    return dict(sets)
+
+
+def summary_table(sets: dict[str, list[dict]]) -> str:
+    lines = ["| trials | context | scene | episodes | success (95% CI) | false success | collisions | "
+             "steps exceeded | mean steps |", "|---|---|---|---|---|---|---|---|---|"]
+    for name in sorted(sets, key=lambda n: (n != "baseline", n)):
+        trials = sets[name]
+        n = len(trials)
+        count = {o: sum(t["outcome"] == o for t in trials) for o in OUTCOMES}
+        lo, hi = wilson_interval(count["success"], n)
+        mean = sum(t["steps"] for t in trials) / n
+        lines.append(f"| {LABELS.get(name, name)} | {trials[0]['context']} | {trials[0]['scene']} | {n} | "
+                     f"{count['success']}/{n} = {count['success'] / n:.0%} ({lo:.0%}-{hi:.0%}) | "
+                     f"{count['false_success']} | {count['collision']} | {count['max_steps']} | {mean:.1f} |")
+    return "\n".join(lines)
+
+
+def trial_lines(sets: dict[str, list[dict]]) -> str:
+    lines = ["| trials | row | outcome | steps | prompt version | flown |", "|---|---|---|---|---|---|"]
+    for name in sorted(sets, key=lambda n: (n != "baseline", n)):
+        for t in sets[name]:
+            lines.append(f"| {name} | {t['row']} | {t['outcome']} | {t['steps']} | {t['prompt_hash']} | "
+                         f"{t['started_at'][:16]} |")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    root = Path(sys.argv[1] if len(sys.argv) > 1 else "trials")
+    sets = load(root)
+    print(summary_table(sets))
+    print()
+    print(trial_lines(sets))
+
+
+if __name__ == "__main__":
+    main()

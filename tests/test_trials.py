@@ -1,0 +1,80 @@
+"""Every recorded real-VLM trial under trials/ replays to its recorded outcome: the regression test of every later
+prompt, FSM or controller change. A change that makes a real pilot's recorded answers end differently fails here.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from vlnpilot.bench.command import bench_command
+from vlnpilot.episode import EpisodeConfig, run_episode
+from vlnpilot.errors import ConfigError
+from vlnpilot.pilots.base import make_pilot
+from vlnpilot.record import load_run
+from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.tasks import Task
+
+TRIALS = Path(__file__).resolve().parents[1] / "trials"
+ALL = sorted(p.parent for p in TRIALS.glob("*/*/trial.json"))
+
+
+@pytest.fixture(scope="module")
+def simulators():
+    sims: dict[str, Simulator] = {}
+    yield lambda scene: sims.setdefault(scene, Simulator(scene, SimConfig(render=False)))
+    for sim in sims.values():
+        sim.close()
+
+
+def replay(sim: Simulator, trial_dir: Path, **overrides):
+    summary, _ = load_run(trial_dir)
+    cfg = summary["config"]
+    recorded = {"max_steps": cfg["max_steps"], "profile": cfg["profile"], "seed": cfg["seed"], "shield": cfg["shield"],
+                "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper")}
+    config = EpisodeConfig(**{**recorded, **overrides})
+    return run_episode(sim, make_pilot(f"replay:{trial_dir}"), Task(**summary["task"]), config,
+                       spawn=summary["spawn"])
+
+
+def test_trials_cover_the_paper_suite() -> None:
+    """The baseline plus at least 24 later episodes, over all 10 rows of the paper suite."""
+    sets = {p.parent.name for p in ALL}
+    assert "baseline" in sets
+    later = [p for p in ALL if p.parent.name != "baseline"]
+    assert len(later) >= 24, len(later)
+    rows = {p.name.rsplit("-", 1)[0] for p in later}
+    assert len(rows) == 10, sorted(rows)
+
+
+@pytest.mark.parametrize("trial_dir", ALL, ids=[f"{p.parent.name}/{p.name}" for p in ALL])
+def test_trial_replays_to_its_recorded_outcome(simulators, trial_dir: Path) -> None:
+    trial = json.loads((trial_dir / "trial.json").read_text())
+    sim = simulators(trial["scene"])
+    assert sim.scene.fingerprint() == trial["scene_fingerprint"], "the scene this trial flew has changed"
+    result = replay(sim, trial_dir)
+    assert (result.outcome, result.steps) == (trial["outcome"], trial["steps"])
+
+
+def test_replay_on_another_scene_is_refused(simulators) -> None:
+    trial_dir = TRIALS / "baseline" / "living-bathroom"
+    with pytest.raises(ConfigError, match="flown in scene 'cabin-v1'.*--scene cabin-v1"):
+        replay(simulators("cabin"), trial_dir)
+
+
+def test_replay_with_another_context_is_refused(simulators) -> None:
+    trial_dir = next(p for p in ALL if p.parent.name == "after-plus")
+    with pytest.raises(ConfigError, match="--context plus"):
+        replay(simulators("cabin"), trial_dir, context="paper")
+
+
+def test_a_set_replays_through_the_bench(tmp_path: Path) -> None:
+    """`vln-pilot bench --suite trials/SET/suite.yaml --pilots replay:trials/SET` reproduces the set."""
+    set_dir = TRIALS / "baseline"
+    out = bench_command(suite=str(set_dir / "suite.yaml"), pilots=f"replay:{set_dir}", out=tmp_path / "bench",
+                        workers=1, progress=False, shield="geometry")
+    got = {r["row"]: r["result"]["outcome"] for r in map(json.loads, (out / "results.jsonl").read_text().splitlines())}
+    want = {p.name: json.loads((p / "trial.json").read_text())["outcome"] for p in set_dir.iterdir() if p.is_dir()}
+    assert got == want
