@@ -13,13 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tello_support import LOCAL_PORT, STATE_PORT, free_udp_port, loopback_only, rig  # noqa: F401
+from tello_support import LOCAL_PORT, STATE_PORT, emulator_config, free_udp_port, loopback_only, rig  # noqa: F401
 from vlnpilot import cli
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
 from vlnpilot.pilots.base import Decision, PilotInput
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.robots.clock import ManualClock
+from vlnpilot.robots.emulator import TelloEmulator
 from vlnpilot.robots.tello import TelloEnv
 from vlnpilot.robots.tello_config import load_tello_config
 from vlnpilot.robots.tello_link import RobotError
@@ -173,3 +174,34 @@ def test_the_cli_times_out_on_a_silent_tello_with_one_line_and_exit_2(tmp_path: 
     assert proc.stderr.strip().splitlines() == [
         f"error: no reply from a Tello at 127.0.0.1:{silent} within 0.6 s: is this computer on the Tello's Wi-Fi "
         "(TELLO-XXXXXX) and the drone switched on?"]
+
+
+def test_ctrl_c_during_a_cli_run_lands_the_tello_and_keeps_the_record(tmp_path: Path) -> None:
+    """`vln-pilot run --robot tello` in its own process; Ctrl-C while the (stdin) pilot thinks."""
+    state_port = free_udp_port("")
+    with TelloEmulator("cabin", emulator_config(state_port=state_port), spawn="living_room") as emu:
+        host, port = emu.address
+        settings = tmp_path / "tello.yaml"
+        settings.write_text(f"command_port: {port}\nlocal_port: {free_udp_port('')}\nstate_port: {state_port}\n"
+                            f"video_port: {emu.config.video_port}\nvideo_latency_s: 0.2\n")
+        out = tmp_path / "run"
+        proc = subprocess.Popen([sys.executable, "-m", "vlnpilot.cli", "run", "Go to the bedroom", "--robot", "tello",
+                                 "--tello-host", host, "--pilot", "stdin", "--judge", "none", "--no-video",
+                                 "--out", str(out)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True,
+                                env={**os.environ, "VLN_PILOT_TELLO_CONFIG": str(settings)})
+        try:
+            for line in proc.stderr:  # the stdin pilot's prompt: it now waits for an answer
+                if line.startswith("answer with ONE line of JSON"):
+                    break
+            assert emu.flying
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        assert proc.returncode == 130, err
+        assert "land" in emu.log.events and not emu.flying
+    events = [json.loads(line) for line in (out / "robot_events.jsonl").read_text().splitlines()]
+    assert [e["action"] for e in events if e["event"] == "operator_interrupt"] == ["land"]
+    assert json.loads((out / "summary.json").read_text())["status"] == "interrupted"
