@@ -159,8 +159,7 @@ class TelloEmulator:
                 return
             text = data.decode("utf-8", "replace").strip()
             self._client = sender[0]
-            with self._state_lock:
-                reply = self.handle(text)
+            reply = self.handle(text)
             if reply is None:
                 continue
             verb = text.split()[0].lower() if text else ""
@@ -175,6 +174,10 @@ class TelloEmulator:
 
     def handle(self, text: str) -> str | None:
         """Execute one SDK command and return the reply (None for `rc`, which the Tello never answers)."""
+        with self._state_lock:  # the state thread integrates rc motion and drains the battery meanwhile
+            return self._handle(text)
+
+    def _handle(self, text: str) -> str | None:
         now = self.clock.now()
         self.log.received.append((now, text))
         self._integrate(now)
