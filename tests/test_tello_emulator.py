@@ -137,3 +137,15 @@ def test_the_tello_emulator_command_refuses_an_unknown_spawn_in_one_line() -> No
                           capture_output=True, text=True, timeout=60)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1
     assert "unknown spawn 'garage'" in proc.stderr
+
+
+def test_the_video_falls_back_to_mpeg4_when_pyav_has_no_h264_encoder(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The fallback stream is still one that djitellopy's reader decodes (format probed from the UDP bytes)."""
+    from vlnpilot.robots import emulator_video
+
+    monkeypatch.setattr(emulator_video, "CODECS", ("no-such-h264-encoder", "mpeg4"))
+    with rig() as (emu, env):
+        assert emu.video.codec == "mpeg4"
+        obs = env.reset("living_room")
+        diff = np.abs(obs.front_rgb.astype(int) - _render(emu).astype(int)).mean()
+        assert obs.info["frame_fresh"] and diff < 15, diff

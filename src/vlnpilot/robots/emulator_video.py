@@ -22,7 +22,20 @@ import av
 import numpy as np
 
 DATAGRAM = 1460  # the Tello's video datagram size
-CODEC = "libx264"
+# H.264 as the Tello sends it; if this PyAV build has no H.264 encoder, raw MPEG-4 Part 2, the closest stream
+# that the same reader (`av.open` on the UDP address, format probed) also decodes.
+CODECS = ("libx264", "libopenh264", "mpeg4")
+
+
+def pick_codec() -> str:
+    """The first encoder of CODECS that this PyAV build offers."""
+    for name in CODECS:
+        try:
+            av.codec.Codec(name, "w")
+        except (av.codec.codec.UnknownCodecError, ValueError):
+            continue
+        return name
+    raise RuntimeError(f"PyAV offers none of the video encoders {', '.join(CODECS)}")
 
 
 class VideoStreamer:
@@ -40,6 +53,7 @@ class VideoStreamer:
         self._stop = threading.Event()
         self._codec: av.CodecContext | None = None
         self._pending: deque[tuple[float, bytes]] = deque()  # (due time, encoded access unit)
+        self.codec = pick_codec()
         self._thread = threading.Thread(target=self._run, name="tello-emulator-video", daemon=True)
         self._thread.start()
 
@@ -59,13 +73,14 @@ class VideoStreamer:
         self._thread.join(timeout=10)
 
     def _encoder(self, height: int, width: int) -> av.CodecContext:
-        ctx = av.CodecContext.create(CODEC, "w")
+        ctx = av.CodecContext.create(self.codec, "w")
         ctx.width, ctx.height = width, height
         ctx.pix_fmt = "yuv420p"
         ctx.time_base = Fraction(1, int(self.fps))
         ctx.framerate = Fraction(int(self.fps), 1)
         ctx.gop_size = max(1, int(self.fps))
-        ctx.options = {"preset": "ultrafast", "tune": "zerolatency"}
+        if self.codec == "libx264":
+            ctx.options = {"preset": "ultrafast", "tune": "zerolatency"}
         return ctx
 
     def _run(self) -> None:

@@ -73,8 +73,9 @@ def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,
     try:  # around the whole block: a Ctrl-C right after the ready line must also stop it cleanly
         with TelloEmulator(scene, config, spawn=spawn) as emu:
             host, port = emu.address
-            say(f"Tello emulator (SDK 2.0) on {host}:{port}: state to port {config.state_port}, H.264 video to port "
-                f"{config.video_port}; drone at spawn {spawn or emu.sim.scene.spawns[0].id} of {emu.sim.scene.name}. "
+            where = f"spawn {spawn or emu.sim.scene.spawns[0].id} of {emu.sim.scene.name}"
+            say(f"Tello emulator (SDK 2.0) on {host}:{port}: state to port {config.state_port}, video "
+                f"({emu.video.codec}) to port {config.video_port}; drone at {where}. "
                 "Fly it with: vln-pilot run \"...\" --robot tello --tello-host 127.0.0.1. Ctrl-C stops it.")
             while not stop.wait(0.5):
                 pass
