@@ -179,6 +179,7 @@ class TelloLink:
         assert self.frames is not None, "start_video() first"
         wanted = settled_at + self.config.video_latency_s
         _, _, count_at_settle = self.frames.latest()
+        started = time.monotonic()
         deadline = time.monotonic() + self.config.video_latency_s + self.config.frame_timeout_s
         while True:
             image, stamp, count = self.frames.latest()
@@ -190,9 +191,12 @@ class TelloLink:
                 break
             time.sleep(0.01)
         now = time.monotonic()
+        # A decoder catching up on a backlog decodes faster than the stream's frame rate: recorded, to be seen.
+        decoded_fps = (count - count_at_settle) / max(now - started, 1e-3)
         return image.copy(), {"frame_fresh": fresh, "frame_age_s": round(now - stamp, 3),
                               "frame_after_settle_s": round(stamp - settled_at, 3),
-                              "frames_dropped": max(0, count - count_at_settle - 1)}
+                              "frames_dropped": max(0, count - count_at_settle - 1),
+                              "decoded_fps": round(decoded_fps, 1)}
 
     # -- keep-alive --------------------------------------------------------------------------------------------
     def start_keepalive(self) -> None:
