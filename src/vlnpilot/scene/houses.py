@@ -99,14 +99,14 @@ def _programme(rng: random.Random, spec: HouseSpec) -> tuple[list[tuple[str, str
         raise HouseSpecError(f"{spec.name}: a hallway needs rooms=3 or more")
     if "hallway" in wanted:
         wanted.remove("hallway")
-    base = ["bedroom", "bathroom"] if n >= 4 else []
-    others = [t for t in base if t not in wanted] + wanted
+    if n - 1 - hallway < len(wanted):
+        raise HouseSpecError(f"{spec.name}: {n} rooms cannot hold living_room, {', '.join(wanted)}"
+                             + (" and a hallway" if hallway else "") + "; ask for more rooms")
+    base = [t for t in ("bedroom", "bathroom") if t not in wanted] if n >= 4 else []  # a home has them if it can
+    others = wanted + base[: n - 1 - hallway - len(wanted)]
     pool = ["kitchen", "study", "bedroom", "bathroom"]
     rng.shuffle(pool)
     free = n - 1 - hallway - len(others)
-    if free < 0:
-        raise HouseSpecError(f"{spec.name}: {n} rooms cannot hold living_room, {', '.join(others)}"
-                             + (" and a hallway" if hallway else "") + "; ask for more rooms")
     for t in pool:
         if free == 0:
             break
