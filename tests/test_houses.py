@@ -147,3 +147,15 @@ def test_types_parameter_puts_the_room_types_in_the_house() -> None:
     scene = load_scene("house:9?rooms=4&types=study")
     assert {"study", "living_room", "hallway"} <= {r.id for r in scene.rooms}
     assert scene.name == "house:9?rooms=4&types=study"
+
+
+def test_scene_render_writes_views_from_every_spawn_and_the_plan(tmp_path) -> None:
+    from typer.testing import CliRunner
+
+    out = tmp_path / "render"
+    result = CliRunner().invoke(cli.app, ["scene", "render", "--scene", "house:2", "--out", str(out),
+                                          "--width", "64", "--height", "48"])
+    assert result.exit_code == 0, result.output
+    spawns = [s.id for s in load_scene("house:2").spawns]
+    expected = {"front.png", "rear.png", "map.png"} | {f"{s}-{v}.png" for s in spawns for v in ("front", "rear")}
+    assert {p.name for p in out.iterdir()} == expected
