@@ -86,3 +86,18 @@ def test_house_env_builds_the_house_of_the_reset_seed() -> None:
         assert info["house"] == "house:8" and isinstance(reward, float)
     finally:
         env.close()
+
+
+def test_the_simulator_cache_keeps_only_the_most_recent_houses_per_thread() -> None:
+    from vlnpilot.bench.executors import SimulatorCache
+
+    cache = SimulatorCache(per_thread=2)
+    try:
+        first = cache.get("house:0", False, 0.0, 0.0)
+        cache.get("house:1", False, 0.0, 0.0)
+        assert cache.get("house:0", False, 0.0, 0.0) is first  # a hit refreshes it
+        cache.get("house:2", False, 0.0, 0.0)  # evicts house:1, the least recently used
+        assert len(cache._all) == 2 and cache.get("house:0", False, 0.0, 0.0) is first
+        assert {s.scene.name for s in cache._all} == {"house:0", "house:2"}
+    finally:
+        cache.close_thread()
