@@ -84,6 +84,9 @@ def test_house_env_builds_the_house_of_the_reset_seed() -> None:
         assert info["house"] == "house:8"
         _, reward, terminated, truncated, info = env.step(0)
         assert info["house"] == "house:8" and isinstance(reward, float)
+        from gymnasium.utils.env_checker import check_env
+
+        check_env(env.unwrapped, skip_render_check=True)
     finally:
         env.close()
 
