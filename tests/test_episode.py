@@ -99,7 +99,7 @@ def valid_code(decision: Decision, state: State) -> str | None:
         code, nxt = get_command(decision.movement).code, parse_state(decision.state)
     except UnknownNameError:
         return None
-    return code if code in spec.moves and nxt in spec.next_states else None
+    return code if spec.allows(code, nxt) and nxt in spec.next_states else None
 
 
 # -- the property: no invalid decision is ever executed ------------------------------------------------------
@@ -185,7 +185,7 @@ def test_no_invalid_decision_is_ever_executed(geo: Simulator, script: list[Actio
             continue
         if codes[-1] is not None:
             assert executed[step] == codes[-1]
-            assert codes[-1] in state_spec(state).moves
+            assert codes[-1] in state_spec(state).answer_moves  # E only with a final state (valid_code)
         else:  # no valid answer after the re-asks: hover, count it
             assert len(pins) == 1 + config.max_reasks
             assert executed[step] == "E"

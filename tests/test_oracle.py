@@ -20,18 +20,20 @@ from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks import parse_query
 
 MARGIN = 2
-# (spawn, query): steps measured on the paper profile (oracle defaults, cabin scene).
+# (spawn, query): steps measured on the paper profile (oracle defaults, cabin scene v2). Issue 12 asks for at most
+# 35 on every row, so that a real pilot has slack within the paper's 50 steps.
+MAX_ORACLE_STEPS = 35
 TABLE_4 = {
-    ("living_room", "Go to the bathroom"): 40,
-    ("living_room", "Go to the bedroom"): 19,
+    ("living_room", "Go to the bathroom"): 33,
+    ("living_room", "Go to the bedroom"): 17,
     ("living_room", "Go to the living room/kitchen"): 1,
-    ("living_room", "Find the refrigerator in the living room or kitchen"): 11,
+    ("living_room", "Find the refrigerator in the living room or kitchen"): 10,
     ("bedroom", "Go to the bedroom"): 1,
-    ("bedroom", "Go to the living room/kitchen"): 22,
+    ("bedroom", "Go to the living room/kitchen"): 20,
     ("bedroom", "Find the mirror in the bedroom"): 10,
     ("bathroom", "Go to the bathroom"): 1,
-    ("bathroom", "Go to the living room/kitchen"): 43,
-    ("bathroom", "Find the sink in the bathroom"): 5,
+    ("bathroom", "Go to the living room/kitchen"): 32,
+    ("bathroom", "Find the sink in the bathroom"): 7,
 }
 ROWS = list(TABLE_4)
 
@@ -56,7 +58,7 @@ def test_oracle_succeeds_on_table_4(geo: Simulator, spawn: str, query: str) -> N
     task = parse_query(query, geo.scene)
     assert result.outcome == "success", result.reason
     assert result.collisions == 0 and not any(r["collided"] for r in records)
-    assert result.steps <= 50
+    assert result.steps <= MAX_ORACLE_STEPS
     assert result.steps <= TABLE_4[(spawn, query)] + MARGIN, f"oracle got slower: {result.steps} steps"
     assert result.final_room == task.goal_room
     assert result.final_state == ("Describe Object" if task.goal_target else "Stay on Room")

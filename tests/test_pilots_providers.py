@@ -86,7 +86,7 @@ def test_round_trip_sends_image_schema_and_fills_usage(provider, fake, pilot_fac
 def test_schema_follows_the_state(state, fake, pilot_factory):
     decision = pilot_factory().decide(sample_input(state))
     spec = state_spec(state)
-    assert fake.last.allowed_movements == list(spec.moves)
+    assert fake.last.allowed_movements == list(spec.answer_moves)
     assert fake.last.allowed_states == [s.value for s in spec.next_states]
     assert decision.movement in spec.moves
 

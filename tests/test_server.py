@@ -233,7 +233,7 @@ def test_openai_pilot_behind_the_server_against_the_fake():
             fake.push("wrong_enum")
             wrong = c.post("/v1/decide", json=_body())
     assert ok.status_code == 200 and ok.json()["usage"]["cost_usd"] > 0
-    assert fake.requests[0].allowed_movements == ["A1", "B1", "B2", "B3", "C1", "C2", "C3"]
+    assert fake.requests[0].allowed_movements == ["A1", "B1", "B2", "B3", "C1", "C2", "C3", "E"]
     assert bad.status_code == 502 and bad.json()["fatal"] is True and "OPENAI_API_KEY" in bad.json()["detail"]
     assert wrong.status_code == 502 and wrong.json()["reason"] == "invalid_enum"
 

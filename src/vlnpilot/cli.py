@@ -104,6 +104,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
         shield: Annotated[str, typer.Option("--shield", help="Safety shield: off, geometry or depth.")] = "geometry",
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
+        context: Annotated[str, typer.Option("--context", help="Pilot context: paper (the paper's five inputs) "
+                                             "or plus (odometry, budget, memory, confirmation).")] = "paper",
         ) -> None:
     """Fly one episode on the embedded simulator, record it and write its report."""
     from vlnpilot.episode import EpisodeConfig, run_episode
@@ -117,7 +119,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
     task = parse_query(query, sc)
-    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay)
+    config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
+                           context=context)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
@@ -200,11 +203,14 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           shield: Annotated[str, typer.Option("--shield", help="off, geometry or depth.")] = "geometry",
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
+          context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True) -> None:
     """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report."""
     from vlnpilot.bench.command import bench_command
 
-    options = {"overlay": overlay} if overlay else {}
+    options: dict[str, str] = {"overlay": overlay} if overlay else {}
+    if context != "paper":
+        options["context"] = context
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=base_url, shield=shield, episode_options=options)

@@ -20,6 +20,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from vlnpilot.commands import HOVER, Command, get_command
+from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, context_name, context_preset
 from vlnpilot.environment import Environment
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
@@ -56,8 +57,11 @@ class EpisodeConfig:
     # Wall-clock bound on one step's pilot calls, re-asks and provider retries included, for pilots that wait on
     # a network (`uses_step_deadline`); when it passes the drone hovers and the step counts an invalid decision.
     step_deadline_s: float | None = 120.0
+    # What the pilot is told beyond the paper's five inputs (vlnpilot.context): a preset name or a ContextConfig.
+    context: ContextConfig | str = "paper"
 
     def __post_init__(self) -> None:
+        object.__setattr__(self, "context", context_preset(self.context))
         if not isinstance(self.max_steps, int) or self.max_steps < 1:
             raise ConfigError(f"max_steps must be a positive integer, got {self.max_steps!r}")
         if self.profile not in PROFILES:
@@ -178,6 +182,12 @@ class _Deadline:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
 
+def _needs_confirmation(context: ContextConfig, decision: Decision | None, asked: dict[str, Any] | None) -> bool:
+    """A valid answer that declares a final state, not yet confirmed, with the confirm_final context item on."""
+    return (context.confirm_final and asked is None and decision is not None
+            and parse_state(decision.state) in FINAL_STATES)
+
+
 def _reseed(pilot: Pilot, seed: int | None) -> None:
     """Give a stochastic pilot the episode's seed (pilots with a `reseed(seed)` method, e.g. noisy-oracle)."""
     if seed is not None and callable(getattr(pilot, "reseed", None)):
@@ -214,13 +224,16 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
+                       "context": {"preset": context_name(config.context), **config.context.to_dict()},
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
+                           "scene_fingerprint": scene.fingerprint(),
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
         })
 
+    pilot_context = PilotContext(config.context, config.max_steps)
     steps = 0
     bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
     deadline = _Deadline(config.step_deadline_s if bounded else None)
@@ -232,17 +245,32 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         fatal = False
         image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
         step_end = time.monotonic() + (config.step_deadline_s or 0.0)
-        for attempt in range(1 + config.max_reasks):
+        context_lines = pilot_context.lines(step)
+        confirmation: dict[str, Any] | None = None
+        attempt, reasks = 0, 0
+        while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=task.query, topological_map=topo, state=state,
-                             previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback))
+                             previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback),
+                             context=context_lines)
             answer = deadline.ask(pilot, pin, state, config.profile, step_end - time.monotonic())
             calls += 1
+            attempt += 1
             usage = usage + answer.usage
             fatal = answer.fatal
+            if answer.error is None and _needs_confirmation(config.context, answer.decision, confirmation):
+                # A final state ends the episode for good: ask once more, with a warning (costs a call, not a step).
+                first = parse_state(answer.decision.state)
+                confirmation = {"attempt": attempt - 1, "first": answer.decision.core(),
+                                "raw_text": answer.decision.raw_text}
+                feedback = [*notes, confirmation_note(first)]
+                continue
             if answer.error is None:
                 decision = answer.decision
+                if confirmation is not None:
+                    confirmation["confirmed"] = decision.state == confirmation["first"]["state"]
                 break
-            failures.append({"attempt": attempt, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
+            reasks += 1
+            failures.append({"attempt": attempt - 1, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
                              "raw_text": answer.raw_text})
             if fatal or answer.kind == "step_deadline":
                 break
@@ -251,7 +279,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
 
         if fatal:
             outcome, reason = "pilot_error", failures[-1]["reason"]
-            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None)
+            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None,
+                    confirmation)
             break
 
         pose_before = obs.pose
@@ -270,7 +299,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         reversal = osc.update(command)
         room_now = gt.room() if gt is not None else None
         _record(recorder, on_step, step, state, decision, failures, command, next_state, obs, pose_before,
-                room_now, reversal, verdict)
+                room_now, reversal, verdict, confirmation)
+        pilot_context.update(step, state, decision, command, next_state)
         previous = command.code
 
         if obs.collided:
@@ -305,13 +335,22 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                          "safety": {"shield": safety.name,
                                     "interventions": [i.to_dict() for i in safety.interventions],
                                     "oscillation_events": [e.to_dict() for e in safety.events]}})
+    _tell_pilot_the_outcome(pilot, result)
     return result
+
+
+def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
+    """A pilot with an `episode_finished(result)` method learns the outcome (the files pilot writes done.txt)."""
+    finished = getattr(pilot, "episode_finished", None)
+    if callable(finished):
+        finished(result)
 
 
 def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,
             decision: Decision | None, failures: list[dict[str, Any]], command: Command | None,
             next_state: State | None, obs: Observation, pose_before: Pose, room_now: str | None,
-            reversal: bool | None, verdict: SafetyVerdict | None = None) -> None:
+            reversal: bool | None, verdict: SafetyVerdict | None = None,
+            confirmation: dict[str, Any] | None = None) -> None:
     record: dict[str, Any] = {
         "step": step,
         "state": state.value,
@@ -334,6 +373,8 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
         "oscillation_event": verdict.oscillation.to_dict() if verdict and verdict.oscillation else None,
         "safety_feedback": list(verdict.feedback) if verdict else [],
     }
+    if confirmation is not None:  # only with the confirm_final context item, so paper-context records are unchanged
+        record["confirmation"] = confirmation
     if recorder is not None:
         record["frames"] = recorder.save_observation(step, obs.front_rgb, obs.rear_rgb)
         recorder.step(record)

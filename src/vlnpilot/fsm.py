@@ -11,6 +11,11 @@ Where the paper is incomplete we decide, and mark each decision with `added_next
   into the new room and then recognises it again: moves A1, A2 and rotations; next states itself or
   Recognize Room.
 * Stay on Room and Describe Object are final: entering one ends the episode and the monitor judges it.
+* Declaring a final state means stopping, so `E` (hover) is accepted together with a final next state even
+  where the state's own row does not list it (Recognize Room -> Stay on Room). Real pilots answered so, and
+  forcing a rotation on a pilot that has finished is a rule no image can justify.
+* The movement of an answer is flown in the *current* state; the next state's moves apply from the next step
+  (a rejection says so when a pilot uses a move of the state it is moving to).
 """
 
 from __future__ import annotations
@@ -71,8 +76,20 @@ class StateSpec:
     def next_states(self) -> tuple[State, ...]:
         return self.paper_next + self.added_next
 
+    @property
+    def answer_moves(self) -> tuple[str, ...]:
+        """Moves an answer may carry: the row's moves, plus `E` when a next state is final (see the module doc)."""
+        if FINAL_MOVE in self.moves or not any(s in FINAL_STATES for s in self.next_states):
+            return self.moves
+        return (*self.moves, FINAL_MOVE)
+
+    def allows(self, move: str, next_state: State) -> bool:
+        """Whether an answer may fly `move` in this state while moving on to `next_state`."""
+        return move in self.moves or (move == FINAL_MOVE and next_state in FINAL_STATES)
+
 
 S = State
+FINAL_MOVE = "E"  # hovering: the move that goes with declaring a final state
 _PAPER_TABLE: tuple[StateSpec, ...] = (
     StateSpec(S.START, "Activate the system and take off.", _moves("E"), (S.RECOGNIZE_ROOM,),
               description="The initial state where the system is activated."),
@@ -109,6 +126,7 @@ _PAPER_TABLE: tuple[StateSpec, ...] = (
 
 # Profiles change allowed moves only, never the transitions. `paper` is Table 3 verbatim.
 # `fast` lets the navigation states fly longer forward moves (use it with a safety shield).
+FINAL_STATES = frozenset(s.state for s in _PAPER_TABLE if s.final)
 _FAST_EXTRA: dict[State, tuple[str, ...]] = {
     S.RECOGNIZE_ROOM: ("A2",),
     S.SEARCH_OPEN_DOOR: ("A2", "A3"),
@@ -117,7 +135,6 @@ _FAST_EXTRA: dict[State, tuple[str, ...]] = {
     S.SEARCH_OBJECT: ("A3",),
 }
 PROFILES = ("paper", "fast")
-FINAL_STATES = frozenset(s.state for s in _PAPER_TABLE if s.final)
 
 
 def fsm_table(profile: str = "paper") -> dict[State, StateSpec]:

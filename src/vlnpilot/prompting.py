@@ -25,8 +25,9 @@ from PIL import Image
 
 from vlnpilot.commands import COMMANDS, Command, Kind, get_command
 from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
-from vlnpilot.fsm import PROFILES, State, StateSpec, parse_state, state_spec
+from vlnpilot.fsm import FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
 from vlnpilot.pilots.base import DOOR_POSITIONS, Decision, PilotInput
+from vlnpilot.success import visual_cue_values
 
 __all__ = [
     "DecisionError",
@@ -112,16 +113,19 @@ def _kind_title(kind: Kind) -> str:
     }[kind]
 
 
-def _movement_commands(moves: Sequence[str]) -> str:
-    """The MOVEMENT COMMANDS body of Appendix B, grouped by command letter, from the command table."""
+def _movement_commands(spec: StateSpec) -> str:
+    """The MOVEMENT COMMANDS body of Appendix B, grouped by command letter, from the command and FSM tables."""
     groups: dict[str, list[Command]] = {}
     for code, command in COMMANDS.items():  # table order, not the order of `moves`
-        if code in moves:
+        if code in spec.answer_moves:
             groups.setdefault(code[0], []).append(command)
+    finals = " or ".join(f"`{s.value}`" for s in spec.next_states if s in FINAL_STATES)
     lines = ["Only return **ONE** movement command from the list below:"]
     for letter, commands in groups.items():
         lines += ["", f"### {letter}. {_kind_title(commands[0].kind)}:"]
-        lines += [f"- `{c.code}`: {c.description}" for c in commands]
+        lines += [f"- `{c.code}`: {c.description}" + (f", only together with the final state {finals}"
+                                                       if c.code not in spec.moves else "") for c in commands]
+    lines += ["", "The movement is flown now, in this state; the moves of the next state apply from the next step."]
     return "\n".join(lines)
 
 
@@ -164,7 +168,7 @@ def render_state_template(template: str, spec: StateSpec, *, where: str = "state
     if "$movement_commands" not in template:
         raise PromptTemplateError(f"{where}: must contain the $movement_commands placeholder")
     named = {c.upper() for c in _CODE_RE.findall(template)}
-    bad = sorted(c for c in named if c not in spec.moves)
+    bad = sorted(c for c in named if c not in spec.answer_moves)
     if bad:
         raise PromptTemplateError(
             f"{where}: names commands {bad} that are not allowed in '{spec.state}' (allowed: {', '.join(spec.moves)})"
@@ -176,7 +180,7 @@ def render_state_template(template: str, spec: StateSpec, *, where: str = "state
     values: dict[str, str] = {
         "state": spec.state.value,
         "goal": spec.goal,
-        "movement_commands": _movement_commands(spec.moves),
+        "movement_commands": _movement_commands(spec),
     }
     groups = {
         "forward_moves": of(Kind.FORWARD),
@@ -186,6 +190,13 @@ def render_state_template(template: str, spec: StateSpec, *, where: str = "state
         "lateral_moves": of(Kind.LATERAL_LEFT, Kind.LATERAL_RIGHT),
     }
     values.update({name: _prose_codes(codes) for name, codes in groups.items() if codes})  # empty group: KeyError below
+    # Direction words come from the command table, so a template cannot pair a code with the wrong direction.
+    smallest = {"left_turn": Kind.ROTATE_LEFT, "right_turn": Kind.ROTATE_RIGHT, "slide_left": Kind.LATERAL_LEFT,
+                "slide_right": Kind.LATERAL_RIGHT}
+    for name, kind in smallest.items():
+        if codes := sorted(of(kind), key=lambda c: COMMANDS[c].amount):
+            values[name] = f"`{codes[0]}`"
+    values.update(visual_cue_values())
     try:
         body = Template(template).substitute(values)
     except (KeyError, ValueError) as exc:
@@ -193,7 +204,7 @@ def render_state_template(template: str, spec: StateSpec, *, where: str = "state
             f"{where}: bad or unavailable placeholder {exc} in state '{spec.state}'; available: {sorted(values)}"
         ) from None
     output_values = Template(_template("output_values.md")).substitute(
-        movements=_codes(spec.moves),
+        movements=_codes(spec.answer_moves),
         states=_codes([s.value for s in spec.next_states]),
         door_positions=_codes(DOOR_POSITIONS),
     )
@@ -244,7 +255,8 @@ def _context(query: str, topological_map: Mapping[str, Any]) -> str:
     )
 
 
-def _step_text(state: State, previous_movement: str | None, step: int, feedback: Sequence[str]) -> str:
+def _step_text(state: State, previous_movement: str | None, step: int, feedback: Sequence[str],
+               context: Sequence[str] = ()) -> str:
     if previous_movement is None or not str(previous_movement).strip():
         previous = "none (this is the first step of the episode)"
     else:
@@ -254,6 +266,10 @@ def _step_text(state: State, previous_movement: str | None, step: int, feedback:
         except UnknownNameError:
             previous = f"`{previous_movement}`"
     text = f"## Current FSM state\n{state.value}\n\n## Previous movement\n{previous}\n\n## Step\n{step}\n"
+    if context:
+        nested = ("  - " if line.startswith(" ") else "- " for line in context)  # memory items nest
+        items = zip(nested, context, strict=True)
+        text += "\n## Pilot context\n" + "".join(f"{b}{line.strip()}\n" for b, line in items)
     lines = [" ".join(str(line).split()) for line in feedback if line and str(line).strip()]
     if lines:
         text += "\n## Controller feedback\n" + "\n".join(f"- {line}" for line in lines) + "\n"
@@ -309,7 +325,8 @@ def build_prompt(pilot_input: PilotInput, *, jpeg_quality: int = 85, max_side: i
         system=system_prompt(),
         context=_context(pilot_input.query, pilot_input.topological_map),
         state_prompt=render_state_prompt(state, pilot_input.profile),
-        step_text=_step_text(state, pilot_input.previous_movement, pilot_input.step, pilot_input.feedback),
+        step_text=_step_text(state, pilot_input.previous_movement, pilot_input.step, pilot_input.feedback,
+                             pilot_input.context),
         image_jpeg=encode_jpeg(pilot_input.image, jpeg_quality, max_side),
         schema=decision_schema(state, pilot_input.profile, map_rooms(pilot_input.topological_map)),
     )
@@ -324,7 +341,7 @@ def decision_schema(state: State, profile: str = "paper", rooms: Sequence[str] |
         room["enum"] = list(dict.fromkeys([*(str(r) for r in rooms), "unknown"]))
     properties: dict[str, Any] = {
         "room": room,
-        "movement": {"type": "string", "enum": list(spec.moves), "description": "one movement command"},
+        "movement": {"type": "string", "enum": list(spec.answer_moves), "description": "one movement command"},
         "state": {"type": "string", "enum": [s.value for s in spec.next_states], "description": "next FSM state"},
         "description": {"type": "string", "description": "what the drone sees and why it decides so"},
         "door_position": {"type": "string", "enum": list(DOOR_POSITIONS), "description": "where a door is"},
@@ -478,15 +495,8 @@ def validate_decision(decision: Decision, state: State, profile: str = "paper") 
     spec = state_spec(state, profile)
     reasons: list[str] = []
     allowed_moves = ", ".join(spec.moves)
-    try:
-        code = get_command(decision.movement).code
-    except UnknownNameError:
-        reasons.append(f"movement {decision.movement!r:.40} is not a movement command; allowed in '{spec.state}': "
-                       f"{allowed_moves}")
-    else:
-        if code not in spec.moves:
-            reasons.append(f"movement {code!r} is not allowed in state '{spec.state}'; allowed: {allowed_moves}")
     allowed_next = ", ".join(f"'{s.value}'" for s in spec.next_states)
+    nxt: State | None = None
     try:
         nxt = parse_state(decision.state)
     except UnknownNameError:
@@ -495,6 +505,18 @@ def validate_decision(decision: Decision, state: State, profile: str = "paper") 
     else:
         if nxt not in spec.next_states:
             reasons.append(f"next state '{nxt.value}' is not allowed from '{spec.state}'; allowed: {allowed_next}")
+    try:
+        code = get_command(decision.movement).code
+    except UnknownNameError:
+        reasons.insert(0, f"movement {decision.movement!r:.40} is not a movement command; allowed in "
+                          f"'{spec.state}': {allowed_moves}")
+    else:
+        if not spec.allows(code, nxt if nxt in spec.next_states else spec.state):
+            why = f"movement {code!r} is not allowed in state '{spec.state}'; allowed: {allowed_moves}"
+            if nxt is not None and nxt is not spec.state and code in state_spec(nxt, profile).moves:
+                why += (f" (the movement is flown now, in '{spec.state}'; the moves of '{nxt.value}' apply from "
+                        "the next step)")
+            reasons.insert(0, why)
     return "; ".join(reasons) or None
 
 

@@ -15,6 +15,7 @@ from vlnpilot.commands import Command, Kind
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State
 from vlnpilot.scene.model import Scene, _norm
+from vlnpilot.success import DEFAULT_SUCCESS, SuccessConfig
 from vlnpilot.types import GroundTruth, Pose, wrap_deg
 
 
@@ -70,16 +71,7 @@ def parse_query(query: str, scene: Scene) -> Task:
     return Task(query=query, goal_room=room.id)
 
 
-@dataclass(frozen=True)
-class SuccessConfig:
-    """The paper's success conditions; thresholds as options."""
-
-    object_distance_m: float = 1.0
-    object_facing_deg: float = 20.0
-    object_must_be_visible: bool = True
-
-
-def judge(task: Task, final_state: State, gt: GroundTruth, config: SuccessConfig = SuccessConfig()) -> tuple[bool, str]:
+def judge(task: Task, final_state: State, gt: GroundTruth, config: SuccessConfig = DEFAULT_SUCCESS) -> tuple[bool, str]:
     """Whether the pilot's final state achieves the task, with a one-line reason."""
     room = gt.room()
     if task.goal_target is None:
@@ -97,7 +89,7 @@ def judge(task: Task, final_state: State, gt: GroundTruth, config: SuccessConfig
                 f"(max ±{config.object_facing_deg:.0f}°), {'visible' if visible else 'not visible'}")
 
 
-def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessConfig = SuccessConfig()) -> float:
+def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessConfig = DEFAULT_SUCCESS) -> float:
     """Geodesic estimate for SPL: straight segments through the centres of the doors on the room path.
 
     For a room goal the path ends 0.1 m inside the goal room; for an object it ends on the target's facing

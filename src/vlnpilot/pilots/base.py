@@ -68,6 +68,7 @@ class PilotInput:
     step: int = 0
     profile: str = "paper"  # FSM profile: which moves each state allows
     feedback: tuple[str, ...] = ()  # validation errors of a re-ask, shield and oscillation notes
+    context: tuple[str, ...] = ()  # pilot context beyond the paper (vlnpilot.context): odometry, budget, memory
 
 
 class PilotError(VLNPilotError):
@@ -111,7 +112,8 @@ def register_pilot(name: str) -> Callable[[PilotFactory], PilotFactory]:
 
 
 _BUILTIN_MODULES = {"oracle": "oracle", "openai": "openai", "gemini": "gemini", "anthropic": "anthropic",
-                    "remote": "remote", "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy"}
+                    "remote": "remote", "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy",
+                    "files": "files"}
 
 
 def _load_builtin_pilots(only: str | None = None) -> None:

@@ -126,12 +126,14 @@ class OraclePilot:
         if state is S.SEARCH_OPEN_DOOR:
             px, py = self._approach_point(*nd)
             err = _bearing(pose, px, py)
-            if math.hypot(px - pose.x, py - pose.y) < 0.08:  # at the approach point: face along the door normal
+            near = math.hypot(px - pose.x, py - pose.y) < 0.08
+            if near:  # at the approach point: face along the door normal
                 err = wrap_deg(math.degrees(math.atan2(nd[1][1], nd[1][0])) - pose.yaw_deg)
             rot = _rotation(err, allowed) if abs(err) > ALIGN_DEG else None
             if rot and abs(err - _signed(rot)) > ALIGN_DEG:
                 return rot, S.SEARCH_OPEN_DOOR, "Turning to look for the open door."
-            return (rot or self._goto(pose, px, py, allowed)), S.ORIENTED_TOWARDS_DOOR, "Open door found ahead."
+            ahead = "A1" if near else self._goto(pose, px, py, allowed)  # never turn back to a point just passed
+            return (rot or ahead), S.ORIENTED_TOWARDS_DOOR, "Open door found ahead."
         if state is S.ORIENTED_TOWARDS_DOOR:
             return self._orient(pose, *nd, allowed)
         if state is S.GO_THROUGH_DOOR:
@@ -142,7 +144,7 @@ class OraclePilot:
             if nd is None:
                 return self._goto(pose, *self._room_entry_point(pose), allowed), S.RECOGNIZE_ROOM, "Entering the room."
             px, py = self._approach_point(*nd)
-            far = math.hypot(px - pose.x, py - pose.y) > 1.0
+            far = math.hypot(px - pose.x, py - pose.y) > 0.4  # A2 here is faster than A1 in the door states
             return self._goto(pose, px, py, allowed), (S.POSITION_IN_CENTER if far else S.RECOGNIZE_ROOM), \
                 "Moving into the room."
         if state is S.SEARCH_OBJECT:

@@ -50,8 +50,12 @@ class ReplayPilot:
         return max(self.steps, default=0)
 
     def _attempts(self, rec: dict[str, Any]) -> list[dict[str, Any] | None]:
-        """What the pilot answered at a recorded step, in order: failure dicts, then None for the decision."""
-        out: list[dict[str, Any] | None] = list(rec.get("failures") or [])
+        """What the pilot answered at a recorded step, in call order: the rejected replies and the answer that was
+        sent back for confirmation (each recorded with its call index), then None for the accepted decision."""
+        calls: list[dict[str, Any]] = list(rec.get("failures") or [])
+        if rec.get("confirmation"):
+            calls.append({**rec["confirmation"], "confirm": True})
+        out: list[dict[str, Any] | None] = sorted(calls, key=lambda c: int(c.get("attempt", 0)))
         if rec.get("decision") is not None:
             out.append(None)
         return out
@@ -76,6 +80,8 @@ class ReplayPilot:
         item = attempts[index]
         if item is None:
             return self._decision(rec)
+        if item.get("confirm"):  # the final state the pilot declared first, before it was asked to confirm
+            return Decision(**item["first"], raw_text=item.get("raw_text"), model=rec.get("model"))
         fatal = rec.get("executed") is None and index == len(attempts) - 1  # the step that ended the episode
         return self._failure(item, fatal)
 

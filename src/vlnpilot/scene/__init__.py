@@ -5,12 +5,12 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from vlnpilot.errors import UnknownNameError
-from vlnpilot.scene.cabin import cabin
+from vlnpilot.scene.cabin import cabin, cabin_v1
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
 from vlnpilot.scene.houses import load_house
 from vlnpilot.scene.model import Door, Room, Scene, Solid, Spawn, Target
 
-SCENES: dict[str, Callable[[], Scene]] = {"cabin": cabin}
+SCENES: dict[str, Callable[[], Scene]] = {"cabin": cabin, "cabin-v1": cabin_v1}
 
 
 def load_scene(name: str | Scene = "cabin") -> Scene:

@@ -17,6 +17,7 @@ states, two crossings must fit in 50 steps.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import cache
 
 from vlnpilot.scene.model import EXTERIOR, Door, Light, Material, Room, Scene, Solid, Spawn, Target
@@ -29,12 +30,35 @@ DOOR_LIVING_BEDROOM, DOOR_BEDROOM_BATHROOM, FRONT_DOOR = "door_living_bedroom", 
 REFRIGERATOR, MIRROR, SINK = "refrigerator", "mirror", "sink"
 
 # -- dimensions (metres) --------------------------------------------------------------------------
-X_LIVING, X_BED, X_BATH, Y_MAX = 4.0, 6.6, 8.6, 3.6  # east edges of the rooms; north wall
+X_LIVING, X_BATH, Y_MAX = 4.0, 8.6, 3.6  # east edges of the living room and the bathroom; north wall
 WALL_H = 2.6  # ceiling height
 T_IN, T_EXT = 0.10, 0.15  # interior and exterior wall thickness
 JAMB, CASING = 0.05, 0.02  # door-frame jamb thickness; how far the casing stands proud of the wall
 DOOR_W, DOOR_H = 0.80, 2.00  # clear opening of the interior doorways
 FLIGHT_Z = 1.0
+
+
+@dataclass(frozen=True)
+class Layout:
+    """What differs between versions of the cabin: the bedroom's depth, its furniture's x extents, the spawns.
+
+    `cabin-v1` is the cabin of the first real-VLM baseline (trials/baseline): a 2.6 m bedroom that left a perfect
+    pilot 7 steps of slack on the two-door rows. `cabin` (v2) has a 2.0 m bedroom with a 1.1 m bed, and spawns
+    that face the way out, so that the oracle needs at most 35 of the paper's 50 steps on every row.
+    """
+
+    version: str
+    x_bed: float  # east edge of the bedroom (the bedroom-bathroom wall's centre line)
+    bed: tuple[float, float]  # x extent of the bed frame
+    wardrobe_x1: float  # the wardrobe stands against the west wall, up to here
+    nightstands: tuple[tuple[float, float], tuple[float, float]]  # x extents, left and right of the bed
+    spawns: tuple[tuple[float, float, float], ...]  # (x, y, yaw) of the living room, bedroom and bathroom spawns
+
+
+V1 = Layout("v1", 6.6, (4.75, 6.15), 4.65, ((4.28, 4.68), (6.20, 6.54)),
+            ((3.25, 0.75, 135.0), (5.35, 1.05, 90.0), (7.25, 1.75, -60.0)))
+V2 = Layout("v2", 6.0, (4.60, 5.70), 4.55, ((4.20, 4.57), (5.73, 5.93)),
+            ((3.25, 0.85, 120.0), (5.15, 1.05, 90.0), (6.70, 1.20, -40.0)))
 
 MATERIALS: tuple[Material, ...] = (
     Material("floor_living", texture="floor_wood", texrepeat=(1.0, 1.0), texuniform=True),
@@ -88,11 +112,12 @@ MATERIALS: tuple[Material, ...] = (
 
 
 # -- the cabin --------------------------------------------------------------------------------------
-DOORS = (
-    Door(DOOR_LIVING_BEDROOM, (LIVING_ROOM, BEDROOM), (X_LIVING, 1.0), DOOR_W, DOOR_H, 0.0),
-    Door(DOOR_BEDROOM_BATHROOM, (BEDROOM, BATHROOM), (X_BED, 1.1), DOOR_W, DOOR_H, 0.0),
-    Door(FRONT_DOOR, (LIVING_ROOM, EXTERIOR), (1.2, 0.0), 0.9, 2.05, -90.0, open=False),
-)
+def _doors(lay: Layout) -> tuple[Door, ...]:
+    return (
+        Door(DOOR_LIVING_BEDROOM, (LIVING_ROOM, BEDROOM), (X_LIVING, 1.0), DOOR_W, DOOR_H, 0.0),
+        Door(DOOR_BEDROOM_BATHROOM, (BEDROOM, BATHROOM), (lay.x_bed, 1.1), DOOR_W, DOOR_H, 0.0),
+        Door(FRONT_DOOR, (LIVING_ROOM, EXTERIOR), (1.2, 0.0), 0.9, 2.05, -90.0, open=False),
+    )
 _WINDOWS = (  # (name, axis, wall line, centre along, width, z0, z1, outer face)
     ("living_window_south", "x", 0.0, 2.9, 1.0, 0.9, 1.9, -T_EXT),
     ("living_window_west", "y", 0.0, 2.95, 0.9, 1.0, 1.9, -T_EXT),
@@ -100,9 +125,10 @@ _WINDOWS = (  # (name, axis, wall line, centre along, width, z0, z1, outer face)
 )
 
 
-def _structure() -> list[Solid]:
+def _structure(lay: Layout) -> list[Solid]:
     s: list[Solid] = []
-    d1, d2, front = DOORS
+    X_BED = lay.x_bed  # noqa: N806 (the wall line, named like the other room edges)
+    d1, d2, front = _doors(lay)
     cut = DOOR_W + 2 * JAMB
     door1 = (d1.center[1], cut, 0.0, DOOR_H + JAMB)
     door2 = (d2.center[1], cut, 0.0, DOOR_H + JAMB)
@@ -198,19 +224,20 @@ def _living_room() -> list[Solid]:
     return s
 
 
-def _bedroom() -> list[Solid]:
+def _bedroom(lay: Layout) -> list[Solid]:
     s: list[Solid] = []
     # double bed, head against the north wall
-    s.append(box("bed_frame", 4.75, 6.15, 1.55, 3.55, 0.10, 0.32, "wood"))
-    for i, (lx, ly) in enumerate(((4.8, 1.6), (6.1, 1.6))):
+    b0, b1 = lay.bed
+    s.append(box("bed_frame", b0, b1, 1.55, 3.55, 0.10, 0.32, "wood"))
+    for i, (lx, ly) in enumerate(((b0 + 0.05, 1.6), (b1 - 0.05, 1.6))):
         s.append(box(f"bed_leg_{i}", lx - 0.04, lx + 0.04, ly - 0.04, ly + 0.04, 0.0, 0.10, "dark_wood"))
-    s.append(box("bed_headboard", 4.72, 6.18, 3.50, 3.58, 0.0, 1.05, "wood"))
-    s.append(box("bed_mattress", 4.78, 6.12, 1.58, 3.50, 0.32, 0.52, "mattress"))
-    s.append(box("bed_blanket", 4.74, 6.16, 1.54, 2.95, 0.30, 0.55, "blanket"))
-    s.append(ellipsoid("bed_pillow_left", 5.12, 3.22, 0.60, 0.28, 0.15, 0.08, "pillow"))
-    s.append(ellipsoid("bed_pillow_right", 5.78, 3.22, 0.60, 0.28, 0.15, 0.08, "pillow"))
+    s.append(box("bed_headboard", b0 - 0.03, b1 + 0.03, 3.50, 3.58, 0.0, 1.05, "wood"))
+    s.append(box("bed_mattress", b0 + 0.03, b1 - 0.03, 1.58, 3.50, 0.32, 0.52, "mattress"))
+    s.append(box("bed_blanket", b0 - 0.01, b1 + 0.01, 1.54, 2.95, 0.30, 0.55, "blanket"))
+    s.append(ellipsoid("bed_pillow_left", b0 + 0.37, 3.22, 0.60, 0.28, 0.15, 0.08, "pillow"))
+    s.append(ellipsoid("bed_pillow_right", b1 - 0.37, 3.22, 0.60, 0.28, 0.15, 0.08, "pillow"))
     # nightstands with lamps
-    for side, (x0, x1) in (("left", (4.28, 4.68)), ("right", (6.20, 6.54))):
+    for side, (x0, x1) in zip(("left", "right"), lay.nightstands, strict=True):
         s.append(box(f"nightstand_{side}", x0, x1, 3.15, 3.58, 0.0, 0.55, "wood"))
         s.append(box(f"nightstand_{side}_drawer", x0 + 0.04, x1 - 0.04, 3.145, 3.15, 0.32, 0.48, "dark_wood",
                      collide=False))
@@ -218,12 +245,13 @@ def _bedroom() -> list[Solid]:
         s.append(cyl(f"bedside_lamp_{side}_base", cx, 3.38, 0.55, 0.78, 0.04, "metal"))
         s.append(cyl(f"bedside_lamp_{side}_shade", cx, 3.38, 0.78, 0.96, 0.11, "lampshade"))
     # wardrobe against the west wall, north of the doorway (clear of the view through the door)
-    s.append(box("wardrobe", X_LIVING + T_IN / 2, 4.65, 1.95, 3.10, 0.0, 2.05, "wood"))
-    s.append(box("wardrobe_door_gap", 4.65, 4.656, 2.52, 2.53, 0.05, 2.0, "dark_wood", collide=False))
+    wx = lay.wardrobe_x1
+    s.append(box("wardrobe", X_LIVING + T_IN / 2, wx, 1.95, 3.10, 0.0, 2.05, "wood"))
+    s.append(box("wardrobe_door_gap", wx, wx + 0.006, 2.52, 2.53, 0.05, 2.0, "dark_wood", collide=False))
     for i, y in enumerate((2.45, 2.60)):
-        s.append(box(f"wardrobe_handle_{i}", 4.65, 4.68, y - 0.01, y + 0.01, 0.9, 1.2, "chrome"))
+        s.append(box(f"wardrobe_handle_{i}", wx, wx + 0.03, y - 0.01, y + 0.01, 0.9, 1.2, "chrome"))
     # full-length mirror (target) on the east wall, facing west
-    mx = X_BED - T_IN / 2
+    mx = lay.x_bed - T_IN / 2
     s.append(box("mirror_frame", mx - 0.05, mx, 2.20, 3.00, 0.40, 2.00, "mirror_frame", target=MIRROR))
     s.append(box("mirror_glass", mx - 0.06, mx - 0.05, 2.25, 2.95, 0.45, 1.95, "mirror_glass", target=MIRROR))
     # a painting on the south wall and a rug beside the bed
@@ -258,40 +286,49 @@ def _bathroom() -> list[Solid]:
     return s
 
 
-_ROOMS = (
-    Room(LIVING_ROOM, "living room / kitchen", ((0, 0), (X_LIVING, 0), (X_LIVING, Y_MAX), (0, Y_MAX)),
-         aliases=("living room", "kitchen", "living room and kitchen", "living room or kitchen", "lounge",
-                  "living"), color=(0.45, 0.80, 0.45)),
-    Room(BEDROOM, "bedroom", ((X_LIVING, 0), (X_BED, 0), (X_BED, Y_MAX), (X_LIVING, Y_MAX)),
-         aliases=("bed room", "sleeping room"), color=(0.85, 0.40, 0.85)),
-    Room(BATHROOM, "bathroom", ((X_BED, 0), (X_BATH, 0), (X_BATH, Y_MAX), (X_BED, Y_MAX)),
-         aliases=("bath room", "restroom", "washroom", "toilet"), color=(0.95, 0.85, 0.30)),
-)
-_TARGETS = (
-    Target(REFRIGERATOR, "refrigerator", LIVING_ROOM, (2.44, 2.90, 0.95), -90.0, aliases=("fridge",)),
-    Target(MIRROR, "mirror", BEDROOM, (X_BED - T_IN / 2 - 0.06, 2.60, 1.20), 180.0,
-           aliases=("full-length mirror", "looking glass")),
-    Target(SINK, "sink", BATHROOM, (8.04, 1.90, 0.88), 180.0, aliases=("washbasin", "basin", "vanity")),
-)
-_SPAWNS = (
-    Spawn(LIVING_ROOM, LIVING_ROOM, Pose(3.25, 0.75, FLIGHT_Z, 135.0),
-          "living room, near the bedroom door, facing the sofa and the kitchen"),
-    Spawn(BEDROOM, BEDROOM, Pose(5.35, 1.05, FLIGHT_Z, 90.0), "bedroom, at the foot of the bed, facing it"),
-    Spawn(BATHROOM, BATHROOM, Pose(7.25, 1.75, FLIGHT_Z, -60.0), "bathroom, facing the toilet"),
+def _rooms(lay: Layout) -> tuple[Room, ...]:
+    x_bed = lay.x_bed
+    return (
+        Room(LIVING_ROOM, "living room / kitchen", ((0, 0), (X_LIVING, 0), (X_LIVING, Y_MAX), (0, Y_MAX)),
+             aliases=("living room", "kitchen", "living room and kitchen", "living room or kitchen", "lounge",
+                      "living"), color=(0.45, 0.80, 0.45)),
+        Room(BEDROOM, "bedroom", ((X_LIVING, 0), (x_bed, 0), (x_bed, Y_MAX), (X_LIVING, Y_MAX)),
+             aliases=("bed room", "sleeping room"), color=(0.85, 0.40, 0.85)),
+        Room(BATHROOM, "bathroom", ((x_bed, 0), (X_BATH, 0), (X_BATH, Y_MAX), (x_bed, Y_MAX)),
+             aliases=("bath room", "restroom", "washroom", "toilet"), color=(0.95, 0.85, 0.30)),
+    )
+
+
+def _targets(lay: Layout) -> tuple[Target, ...]:
+    return (
+        Target(REFRIGERATOR, "refrigerator", LIVING_ROOM, (2.44, 2.90, 0.95), -90.0, aliases=("fridge",)),
+        Target(MIRROR, "mirror", BEDROOM, (lay.x_bed - T_IN / 2 - 0.06, 2.60, 1.20), 180.0,
+               aliases=("full-length mirror", "looking glass")),
+        Target(SINK, "sink", BATHROOM, (8.04, 1.90, 0.88), 180.0, aliases=("washbasin", "basin", "vanity")),
+    )
+
+
+_SPAWN_TEXT = (
+    (LIVING_ROOM, "living room, near the bedroom door, facing the sofa and the kitchen"),
+    (BEDROOM, "bedroom, at the foot of the bed, facing it"),
+    (BATHROOM, "bathroom, facing the toilet"),
 )
 
 
-@cache
-def cabin() -> Scene:
-    """The built-in cabin scene (cached: it is immutable)."""
+def _spawns(lay: Layout) -> tuple[Spawn, ...]:
+    return tuple(Spawn(room, room, Pose(x, y, FLIGHT_Z, yaw), text)
+                 for (room, text), (x, y, yaw) in zip(_SPAWN_TEXT, lay.spawns, strict=True))
+
+
+def _build(name: str, lay: Layout) -> Scene:
     return Scene(
-        name="cabin",
+        name=name,
         description="A compact wooden cabin: living room and kitchen (left), bedroom (centre), bathroom (right).",
-        rooms=_ROOMS,
-        doors=DOORS,
-        targets=_TARGETS,
-        spawns=_SPAWNS,
-        solids=tuple(_structure() + _living_room() + _bedroom() + _bathroom()),
+        rooms=_rooms(lay),
+        doors=_doors(lay),
+        targets=_targets(lay),
+        spawns=_spawns(lay),
+        solids=tuple(_structure(lay) + _living_room() + _bedroom(lay) + _bathroom()),
         materials=MATERIALS,
         lights=(
             Light("light_living", (2.0, 1.8, 2.35), (0.45, 0.42, 0.38), attenuation=(0.6, 0.15, 0.0)),
@@ -302,3 +339,15 @@ def cabin() -> Scene:
         ceiling_height=WALL_H,
         flight_altitude=FLIGHT_Z,
     )
+
+
+@cache
+def cabin() -> Scene:
+    """The built-in cabin scene (v2; cached: it is immutable)."""
+    return _build("cabin", V2)
+
+
+@cache
+def cabin_v1() -> Scene:
+    """The cabin as the first real-VLM baseline flew it (kept so that its trials still replay)."""
+    return _build("cabin-v1", V1)

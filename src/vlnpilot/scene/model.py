@@ -5,6 +5,7 @@ Pure data (plus geometry queries). MJCF generation lives in `mjcf.py`; nothing h
 
 from __future__ import annotations
 
+import hashlib
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -253,6 +254,10 @@ class Scene:
                 {"from": d.rooms[0], "to": d.rooms[1], "via": d.id, "type": "open door"} for d in self.open_doors()
             ],
         }
+
+    def fingerprint(self) -> str:
+        """A short hash of everything the scene is made of: a recording names the exact scene it flew."""
+        return hashlib.sha256(repr(self).encode("utf-8")).hexdigest()[:12]
 
     def info(self) -> dict[str, Any]:
         """Everything `vln-pilot scene info --json` prints."""

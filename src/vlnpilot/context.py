@@ -1,0 +1,149 @@
+"""What the pilot is told beyond the paper's five inputs: odometry, the step budget, a short memory and a
+confirmation before a final state.
+
+A real VLM flying from images alone cannot tell how far it has flown: a doorway fills the wide-angle view
+(and its frame leaves the image) about half a metre *before* the drone reaches it, and 10 cm moves barely change
+the picture. Everything here is known to a real drone without ground truth: odometry is dead reckoning from the
+executed commands (a Tello has it from its own commands and IMU), the budget and the memory are the controller's.
+
+Presets: `paper` gives exactly the paper's five inputs (the default, so Table 4 stays a reproduction); `plus`
+switches every item on. Each item is a field of `ContextConfig`, so any mix can be flown and is recorded.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import asdict, dataclass, replace
+from typing import Any
+
+from vlnpilot.commands import Command
+from vlnpilot.errors import ConfigError, UnknownNameError
+from vlnpilot.fsm import State
+
+CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends the episode and cannot be undone. "
+                "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "
+                "otherwise choose another state and movement.")
+_CONFIRM_WHY = {
+    State.STAY_ON_ROOM: " (the drone is inside the goal room, well past the door it came through)",
+    State.DESCRIBE_OBJECT: " (measure again how much of the image width the whole object spans: the stop rule of "
+                           "Reach Object)",
+}
+
+
+@dataclass(frozen=True)
+class ContextConfig:
+    """Items of pilot context beyond the paper's inputs (all off: the paper)."""
+
+    odometry: bool = False  # forward/sideways distance and net rotation since the state began and since the last door
+    budget: bool = False  # steps used and left
+    memory: int = 0  # the pilot's own last N decisions (state, move, next state, room, description)
+    confirm_final: bool = False  # ask once more, with a warning, before a final state is accepted
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.memory, int) or not 0 <= self.memory <= 10:
+            raise ConfigError(f"context memory must be an integer from 0 to 10, got {self.memory!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @property
+    def is_paper(self) -> bool:
+        return self == ContextConfig()
+
+
+CONTEXT_PRESETS: dict[str, ContextConfig] = {
+    "paper": ContextConfig(),
+    "plus": ContextConfig(odometry=True, budget=True, memory=4, confirm_final=True),
+}
+
+
+def context_preset(name: str | ContextConfig) -> ContextConfig:
+    """A preset by name (`paper`, `plus`), or a ContextConfig as is."""
+    if isinstance(name, ContextConfig):
+        return name
+    try:
+        return CONTEXT_PRESETS[str(name).strip().lower()]
+    except KeyError:
+        raise UnknownNameError("context preset", name, list(CONTEXT_PRESETS)) from None
+
+
+def context_name(config: ContextConfig) -> str:
+    """The preset's name, or 'custom'."""
+    return next((name for name, preset in CONTEXT_PRESETS.items() if preset == config), "custom")
+
+
+@dataclass(frozen=True)
+class Travel:
+    """Dead-reckoned travel in the drone's own frame: forward and sideways metres, net rotation (+ = left)."""
+
+    forward_m: float = 0.0
+    lateral_m: float = 0.0  # + = left
+    rotation_deg: float = 0.0
+
+    def add(self, command: Command) -> Travel:
+        m = command.motion()
+        return replace(self, forward_m=self.forward_m + m.forward_m, lateral_m=self.lateral_m + m.lateral_m,
+                       rotation_deg=self.rotation_deg + m.yaw_deg)
+
+    def text(self) -> str:
+        side = "left" if self.lateral_m > 0 else "right"
+        turn = "left" if self.rotation_deg > 0 else "right"
+        parts = [f"forward {self.forward_m:.2f} m"]
+        if abs(self.lateral_m) >= 0.005:
+            parts.append(f"sideways {abs(self.lateral_m):.2f} m {side}")
+        parts.append(f"net rotation {abs(self.rotation_deg):.0f}° {turn}" if abs(self.rotation_deg) >= 0.5
+                     else "net rotation 0°")
+        return ", ".join(parts)
+
+
+class PilotContext:
+    """Tracks the episode for the context items and renders them as lines of the step prompt."""
+
+    def __init__(self, config: ContextConfig, max_steps: int):
+        self.config, self.max_steps = config, max_steps
+        self._state: State | None = None
+        self._in_state = Travel()
+        self._since_door: Travel | None = None  # None until the first Go Through Door
+        self._memory: deque[str] = deque(maxlen=max(config.memory, 1))
+
+    def update(self, step: int, state: State, decision: Any, executed: Command, next_state: State) -> None:
+        """After a step: `executed` was flown in `state`, and the FSM moves on to `next_state`."""
+        self._in_state = self._in_state.add(executed)
+        if self._since_door is not None:
+            self._since_door = self._since_door.add(executed)
+        if next_state is not state:
+            self._in_state = Travel()
+            if next_state is State.GO_THROUGH_DOOR:
+                self._since_door = Travel()
+        if decision is not None and self.config.memory:
+            proposed = "" if decision.movement == executed.code else f" (executed {executed.code})"
+            self._memory.append(f"step {step}: in {state.value}, you chose {decision.movement}{proposed} -> "
+                                f"{next_state.value}; room {decision.room}; you saw: {_short(decision.description)}")
+
+    def lines(self, step: int) -> tuple[str, ...]:
+        """The context lines of this step's prompt (empty for the paper context)."""
+        c, out = self.config, []
+        if c.budget:
+            out.append(f"Step budget: this is step {step} of {self.max_steps}; {self.max_steps - step} steps "
+                       "remain after this one.")
+        if c.odometry:
+            out.append(f"Odometry in the current state (it restarts at every state change): {self._in_state.text()}.")
+            if self._since_door is None:
+                out.append("Odometry since the last door crossing began (entering Go Through Door): no door "
+                           "crossed yet.")
+            else:
+                out.append("Odometry since the last door crossing began (entering Go Through Door): "
+                           f"{self._since_door.text()}.")
+        if c.memory and self._memory:
+            out.append("Your last decisions, oldest first:")
+            out += [f"  {m}" for m in list(self._memory)[-c.memory:]]
+        return tuple(out)
+
+
+def confirmation_note(state: State) -> str:
+    return CONFIRM_NOTE.format(state=state.value, why=_CONFIRM_WHY.get(state, ""))
+
+
+def _short(text: str, limit: int = 140) -> str:
+    text = " ".join(str(text).split())
+    return text if len(text) <= limit else text[: limit - 1] + "…"
