@@ -18,7 +18,7 @@ from vlnpilot.scene.model import Scene
 DEFAULT_SEEDS = tuple(range(20))
 QUERIES_PER_HOUSE = 5
 MAX_SEEDS = 1000
-MAX_STEPS = 200  # the oracle's longest route in the default suite takes about 135 steps of the paper profile
+MAX_STEPS = 200  # the oracle's longest route in the default suite takes 121 steps of the paper profile
 _NAME_RE = re.compile(r"^houses(?::(.*))?$", re.IGNORECASE)
 
 
