@@ -159,3 +159,19 @@ def test_scene_render_writes_views_from_every_spawn_and_the_plan(tmp_path) -> No
     spawns = [s.id for s in load_scene("house:2").spawns]
     expected = {"front.png", "rear.png", "map.png"} | {f"{s}-{v}.png" for s in spawns for v in ("front", "rear")}
     assert {p.name for p in out.iterdir()} == expected
+
+
+def test_every_target_is_seen_by_the_camera_from_its_viewing_point() -> None:
+    from vlnpilot.sim import SimConfig, Simulator
+    from vlnpilot.sim.ground_truth import SimGroundTruth
+    from vlnpilot.types import Pose
+
+    for name in ("house:0", "house:5", "house:9?rooms=5"):
+        with Simulator(name, SimConfig(width=64, height=48, rear_width=16, rear_height=16)) as sim:
+            truth = SimGroundTruth(sim)
+            for t in sim.scene.targets:
+                x, y = viewing_point(sim.scene, t.id)
+                sim.reset(Pose(x, y, sim.scene.flight_altitude, t.facing_deg + 180.0))
+                distance, bearing = truth.target_distance_bearing(t.id)
+                assert distance <= 1.0 and abs(bearing) < 1.0
+                assert truth.target_visible(t.id), (name, t.id, truth.target_pixel_fraction(t.id))
