@@ -134,7 +134,7 @@ def test_interrupt_exits_130_and_keeps_the_steps(monkeypatch: pytest.MonkeyPatch
     code, _, err = run_main(monkeypatch, capsys, "run", "Go to the bathroom", "--pilot", "oracle", "--out", str(out))
     assert code == 130 and "Traceback" not in err  # (typer turns Ctrl-C into exit 130 before main() sees it)
     summary, steps = load_run(out)
-    assert summary["status"] == "running" and [s["step"] for s in steps] == [1, 2, 3]
+    assert summary["status"] == "interrupted" and [s["step"] for s in steps] == [1, 2, 3]
 
 
 def test_entry_point_exit_codes_in_a_subprocess(tmp_path: Path) -> None:

@@ -25,7 +25,7 @@ def served():
     def factory(spec: str, **options) -> ScriptedPilot:
         return pilots.setdefault(spec, ScriptedPilot(model=spec))
 
-    app = create_app(factory, token=TOKEN, pilot_spec="openai:gpt-4.1")
+    app = create_app(factory, token=TOKEN, pilot_spec="openai:gpt-4.1", allowed_pilots=["gemini:gemini-2.5-flash"])
     with ServerThread(app) as url:
         yield url, pilots
 

@@ -92,15 +92,15 @@ def test_replay_reproduces_rejections_reasks_and_a_fatal_end(geo: Simulator, tmp
     items: list[str | BaseException] = [
         reply("A3", "Recognize Room"),  # step 1: not allowed (kept with its raw text), then valid
         reply("C1", "Recognize Room"),
-        DecisionError("no JSON object found"),  # step 2: malformed, provider error, then valid
-        PilotError("503 from the provider", reason="unavailable"),
+        DecisionError("no JSON object found"),  # step 2: malformed, then valid
         reply("b1", "search open door"),
-        reply("Z9", "Land"), reply("Z9", "Land"), reply("Z9", "Land"),  # step 3: three invalid -> hover
-        PilotError("invalid API key", fatal=True, reason="auth"),  # step 4: fatal
+        PilotError("503 from the provider", reason="unavailable"),  # step 3: transient: hover, no re-ask
+        reply("Z9", "Land"), reply("Z9", "Land"), reply("Z9", "Land"),  # step 4: three invalid -> hover
+        PilotError("invalid API key", fatal=True, reason="auth"),  # step 5: fatal
     ]
     recorded, rec_steps = fly(geo, Script(items), "bedroom", "Go to the bathroom", tmp_path / "rec")
-    assert recorded.outcome == "pilot_error" and recorded.steps == 4 and recorded.invalid_decisions == 1
-    assert [len(r["failures"]) for r in rec_steps] == [1, 2, 3, 1]
+    assert recorded.outcome == "pilot_error" and recorded.steps == 5 and recorded.invalid_decisions == 2
+    assert [len(r["failures"]) for r in rec_steps] == [1, 1, 1, 3, 1]
     replayed, rep_steps = fly(geo, ReplayPilot(run_dir=tmp_path / "rec"), "bedroom", "Go to the bathroom")
     assert strip(rep_steps) == strip(rec_steps)
     assert same_result(replayed, recorded)

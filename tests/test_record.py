@@ -131,7 +131,7 @@ def test_interrupted_run_keeps_every_step_so_far(small_sim: Simulator, tmp_path:
         finally:
             recorder.close()  # what the CLI does
     summary, steps = load_run(run_dir)
-    assert summary["status"] == "running" and "result" not in summary
+    assert summary["status"] == "interrupted" and "result" not in summary
     assert summary["task"]["goal_room"] == "bathroom" and summary["provenance"]["prompt_hash"]
     assert [s["step"] for s in steps] == list(range(1, k))
     assert all(STEP_FIELDS <= set(s) for s in steps)

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import signal
 import sys
 from pathlib import Path
 from typing import Annotated
@@ -106,11 +108,16 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
         context: Annotated[str, typer.Option("--context", help="Pilot context: paper (the paper's five inputs) "
                                              "or plus (odometry, budget, memory, confirmation).")] = "paper",
+        overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a run already in --out.")] = False,
         ) -> None:
-    """Fly one episode on the embedded simulator, record it and write its report."""
+    """Fly one episode on the embedded simulator, record it and write its report.
+
+    Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 2 for bad input,
+    130 when interrupted."""
     from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.record import Recorder, check_writable, default_run_dir
+    from vlnpilot.record import Recorder, claim_run_dir, default_run_dir
     from vlnpilot.scene import load_scene
     from vlnpilot.sim import Simulator
     from vlnpilot.tasks import parse_query
@@ -124,9 +131,10 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
-    options = {"base_url": base_url} if base_url else {}
+    options = {"base_url": check_base_url(base_url)} if base_url else {}
+    _say_remote_url(pilot)
     pilot_obj = make_pilot(pilot, **options)
-    run_dir = check_writable(out or default_run_dir("runs", f"{spawn_id}-{query}"))
+    run_dir = claim_run_dir(out or default_run_dir("runs", f"{spawn_id}-{query}"), overwrite=overwrite)
 
     def show(rec: dict) -> None:
         if quiet:
@@ -140,22 +148,50 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
-    with Simulator(sc) as env:
-        recorder = Recorder(run_dir)
+    with Simulator(sc) as env, _sigterm_interrupts():
+        recorder = Recorder(run_dir, overwrite=True)  # claimed above
         try:
             result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
                                  pilot_spec=pilot)
         except KeyboardInterrupt:
+            recorder.close("interrupted")
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
             raise typer.Exit(130) from None
         finally:
-            recorder.close()
+            recorder.close("failed")
     colour = "green" if result.success else "red"
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
     report = _write_episode_report(run_dir, video=video)
     console.print(f"run directory: {escape(str(run_dir))}  (report: {escape(str(report))})")
+    raise typer.Exit(exit_code_for([result.outcome]))
+
+
+def _say_remote_url(spec: str) -> None:
+    """The remote pilot falls back to a local server: say so, rather than silently."""
+    from vlnpilot.pilots.base import parse_spec
+    from vlnpilot.pilots.remote import DEFAULT_URL, URL_ENV
+
+    if parse_spec(spec)[0] == "remote" and not os.environ.get(URL_ENV):
+        err_console.print(f"pilot server: {DEFAULT_URL} ({URL_ENV} is not set)", highlight=False)
+
+
+@contextlib.contextmanager
+def _sigterm_interrupts():
+    """SIGTERM ends a run like Ctrl-C: the record is closed as 'interrupted' and the exit code is 130."""
+    def interrupt(signum: int, frame: object) -> None:
+        raise KeyboardInterrupt
+
+    try:
+        previous = signal.signal(signal.SIGTERM, interrupt)
+    except ValueError:  # not the main thread (an embedding): leave SIGTERM alone
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def _write_episode_report(run_dir: Path, *, video: bool = True) -> Path:
@@ -205,26 +241,36 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
           context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True) -> None:
-    """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report."""
+    """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report.
+
+    Exit code 0 when every episode was flown to an outcome, 3 when any ended in pilot_error, 2 for bad input."""
     from vlnpilot.bench.command import bench_command
+    from vlnpilot.bench.results import RESULTS, ResultsLog
+    from vlnpilot.exits import check_base_url, exit_code_for
 
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     if context != "paper":
         options["context"] = context
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
-                              profile=profile, base_url=base_url, shield=shield, episode_options=options)
+                              profile=profile, base_url=check_base_url(base_url), shield=shield,
+                              episode_options=options)
     if report:
         from vlnpilot.report.html import write_bench_report
 
         console.print(f"report: {escape(str(write_bench_report(bench_dir)))}")
+    raise typer.Exit(exit_code_for(r["result"]["outcome"] for r in ResultsLog(bench_dir / RESULTS).read()))
 
 
 @app.command("serve")
 def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
           port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8000,
-          pilot: Annotated[str | None, typer.Option("--pilot", help="Default pilot SPEC.")] = None) -> None:
-    """Serve pilots over HTTP (POST /v1/decide, GET /healthz, OpenAPI at /docs); VLN_PILOT_TOKEN sets a bearer token."""
+          pilot: Annotated[str | None, typer.Option("--pilot", help="Default pilot SPEC.")] = None,
+          allow: Annotated[list[str] | None, typer.Option("--allow", help="Another pilot SPEC clients may ask for "
+                                                          "(repeatable); nothing else is served.")] = None) -> None:
+    """Serve pilots over HTTP (POST /v1/decide, GET /healthz, OpenAPI at /docs); VLN_PILOT_TOKEN sets a bearer token.
+
+    Only --pilot and the --allow SPECs are served; off loopback a token is required."""
     from vlnpilot.server.app import serve as run_server
 
     if pilot is None:
@@ -232,19 +278,36 @@ def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
         if pilot == "oracle":  # the oracle needs the simulator's ground truth, which a server does not have
             pilot, why = "openai", "the default model pilot; set OPENAI_API_KEY"
         console.print(f"default pilot: [bold]{pilot}[/bold] ({why})")
-    run_server(host=host, port=port, pilot_spec=pilot)
+    run_server(host=host, port=port, pilot_spec=pilot, allowed_pilots=allow or [])
 
 
 def main() -> None:
-    """Entry point: bad input becomes one clear line on stderr and exit code 2, never a traceback."""
+    """Entry point: bad input becomes one clear line on stderr and exit code 2, never a traceback.
+
+    Exit codes (vlnpilot.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 130 interrupted.
+    """
+    # click's exception module, wherever this Typer keeps it (Typer >= 0.20 vendors click as typer._click)
+    click_errors = sys.modules[typer.BadParameter.__module__]
     try:
-        app()
+        code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
     except VLNPilotError as exc:
-        err_console.print(f"[bold red]error:[/bold red] {escape(str(exc))}", highlight=False)
+        _one_line_error(str(exc))
         sys.exit(2)
-    except KeyboardInterrupt:
+    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:  # a bare `vln-pilot`: the help, as before
+        exc.show()
+        sys.exit(exc.exit_code)
+    except click_errors.ClickException as exc:
+        _one_line_error(exc.format_message())
+        sys.exit(exc.exit_code)
+    except (KeyboardInterrupt, click_errors.Abort):
         err_console.print("interrupted: every step recorded so far is kept")
         sys.exit(130)
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+def _one_line_error(message: str) -> None:
+    line = " ".join(message.split())  # a framework message may span lines
+    err_console.print(f"[bold red]error:[/bold red] {escape(line)}", highlight=False)
 
 
 if __name__ == "__main__":

@@ -113,8 +113,8 @@ class PilotContext:
             self._since_door = self._since_door.add(executed)
         if next_state is not state:
             self._in_state = Travel()
-            if next_state is State.GO_THROUGH_DOOR:
-                self._since_door = Travel()
+            if next_state is State.GO_THROUGH_DOOR:  # the crossing began with this step's move
+                self._since_door = Travel().add(executed)
         if decision is not None and self.config.memory:
             proposed = "" if decision.movement == executed.code else f" (executed {executed.code})"
             self._memory.append(f"step {step}: in {state.value}, you chose {decision.movement}{proposed} -> "

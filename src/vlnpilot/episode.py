@@ -2,7 +2,8 @@
 
 Each step: observe, ask the pilot, validate the decision against the FSM (is the movement allowed in this
 state? is the transition allowed?), execute, update the FSM, check termination. An invalid decision is
-never executed: the pilot is re-asked with the validation error (at most `max_reasks` times), then the
+never executed: the pilot is re-asked with the validation error (at most `max_reasks` times; a transient
+provider failure, already retried by the SDK, is not re-asked and not told to the model), then the
 drone hovers (E) and the step counts an invalid decision.
 
 Between the validated decision and the drone sits the safety layer (`vlnpilot.safety`, `EpisodeConfig.shield`):
@@ -14,8 +15,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from concurrent.futures import ThreadPoolExecutor
-from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -24,6 +23,9 @@ from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, con
 from vlnpilot.environment import Environment
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
+from vlnpilot.overrides import override_reason
+from vlnpilot.pilots._common import TRANSIENT_REASONS
+from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
 from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
 from vlnpilot.record import Recorder, git_sha, package_versions
@@ -148,38 +150,39 @@ def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> _Answer:
 
 
 class _Deadline:
-    """Runs pilot calls in a helper thread so that a step can stop waiting when its deadline passes.
+    """Runs pilot calls in a helper (daemon) thread so that a step can stop waiting when its deadline passes.
 
-    A call still running at the deadline is abandoned (the provider SDK's own timeout ends it later) and
-    the next call gets a fresh thread, so a hung request never blocks the episode.
+    A call still running at the deadline is abandoned and cancelled (`cancel_pending`: its SDK sends no further
+    request, retries included), and the next call gets a fresh thread, so a hung request never blocks the
+    episode, never calls the provider after the episode, and never holds up the process's exit.
     """
 
-    def __init__(self, seconds: float | None):
+    def __init__(self, seconds: float | None, pilot: Pilot | None = None):
         self.seconds = seconds
-        self._pool: ThreadPoolExecutor | None = None
+        self._pilot = pilot
 
     def ask(self, pilot: Pilot, pin: PilotInput, state: State, profile: str, remaining_s: float) -> _Answer:
         if self.seconds is None:
             return _ask(pilot, pin, state, profile)
         if remaining_s <= 0:
             return self.expired()
-        if self._pool is None:
-            self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="pilot-call")
-        future = self._pool.submit(_ask, pilot, pin, state, profile)
-        try:
-            return future.result(timeout=remaining_s)
-        except FutureTimeout:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        finished, answer = call_in_daemon_thread(lambda: _ask(pilot, pin, state, profile), remaining_s)
+        if not finished:
+            self._cancel()
             return self.expired()
+        return answer
+
+    def _cancel(self) -> None:
+        cancel = getattr(self._pilot, "cancel_pending", None)
+        if callable(cancel):
+            cancel()
 
     def expired(self) -> _Answer:
         return _Answer(None, f"step_deadline: no valid answer within the step deadline of {self.seconds:g} s",
                        kind="step_deadline")
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
+        self._cancel()  # the episode is over: nothing may call the provider for it any more
 
 
 def _needs_confirmation(context: ContextConfig, decision: Decision | None, asked: dict[str, Any] | None) -> bool:
@@ -233,10 +236,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
         })
 
+    _tell_pilot_the_episode(pilot, scene, config)
     pilot_context = PilotContext(config.context, config.max_steps)
     steps = 0
     bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
-    deadline = _Deadline(config.step_deadline_s if bounded else None)
+    deadline = _Deadline(config.step_deadline_s if bounded else None, pilot)
     for step in range(1, config.max_steps + 1):
         steps = step
         feedback: list[str] = list(notes)
@@ -272,15 +276,15 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             reasks += 1
             failures.append({"attempt": attempt - 1, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
                              "raw_text": answer.raw_text})
-            if fatal or answer.kind == "step_deadline":
-                break
+            if fatal or answer.kind == "step_deadline" or answer.kind in TRANSIENT_REASONS:
+                break  # re-ask only an unusable answer; a transient failure is the transport's, not the model's
             why = answer.hint or f"{answer.error}. Answer again with valid values."
             feedback = [*notes, f"Your previous answer was rejected: {why}"]
 
         if fatal:
             outcome, reason = "pilot_error", failures[-1]["reason"]
             _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None,
-                    confirmation)
+                    confirmation=confirmation)
             break
 
         pose_before = obs.pose
@@ -298,8 +302,10 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         path.update(pose_before, obs.pose)
         reversal = osc.update(command)
         room_now = gt.room() if gt is not None else None
+        override = override_reason(state, config.profile, command, decision is None, verdict.interventions,
+                                   next_state)
         _record(recorder, on_step, step, state, decision, failures, command, next_state, obs, pose_before,
-                room_now, reversal, verdict, confirmation)
+                room_now, reversal, verdict, override, confirmation)
         pilot_context.update(step, state, decision, command, next_state)
         previous = command.code
 
@@ -339,6 +345,13 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     return result
 
 
+def _tell_pilot_the_episode(pilot: Pilot, scene: Any, config: EpisodeConfig) -> None:
+    """A pilot with an `episode_started(scene, config)` method sees them first (the replay pilot checks them)."""
+    started = getattr(pilot, "episode_started", None)
+    if callable(started):
+        started(scene, config)
+
+
 def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
     """A pilot with an `episode_finished(result)` method learns the outcome (the files pilot writes done.txt)."""
     finished = getattr(pilot, "episode_finished", None)
@@ -349,7 +362,7 @@ def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
 def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,
             decision: Decision | None, failures: list[dict[str, Any]], command: Command | None,
             next_state: State | None, obs: Observation, pose_before: Pose, room_now: str | None,
-            reversal: bool | None, verdict: SafetyVerdict | None = None,
+            reversal: bool | None, verdict: SafetyVerdict | None = None, override: str | None = None,
             confirmation: dict[str, Any] | None = None) -> None:
     record: dict[str, Any] = {
         "step": step,
@@ -361,6 +374,7 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
         "failures": failures,
         "proposed": decision.movement if decision else None,
         "executed": command.code if command else None,
+        "override": override,  # why an executed command outside the state's allowed moves ran (vlnpilot.overrides)
         "next_state": next_state.value if next_state else None,
         "pose_before": pose_before.as_dict(),
         "pose_after": obs.pose.as_dict(),

@@ -1,10 +1,13 @@
 """Recordings: every run writes a directory that can be replayed and reported.
 
-    RUN_DIR/summary.json    task, pilot, outcome, metrics, provenance (rewritten at the end; 'running' before)
+    RUN_DIR/summary.json    task, pilot, outcome, metrics, provenance (written first with status 'running';
+                            rewritten at the end as 'finished', or 'interrupted' after Ctrl-C/SIGTERM)
     RUN_DIR/episode.jsonl   one JSON line per step, appended and flushed as the step ends
     RUN_DIR/frames/         front_NNN.jpg and rear_NNN.jpg (NNN = step; 000 is the start)
 
-A run that is interrupted keeps every step written so far. Nothing here ever sees an API key: only
+A run that is interrupted keeps every step written so far. A directory that already holds a run is refused
+(never two episodes in one record) unless `overwrite` clears it first. Model replies are capped at
+MAX_RECORDED_TEXT characters (with a marker and the original length). Nothing here ever sees an API key: only
 decisions, poses and images are written.
 """
 
@@ -14,6 +17,7 @@ import functools
 import json
 import os
 import platform
+import shutil
 import subprocess
 import tempfile
 from datetime import UTC, datetime
@@ -27,6 +31,29 @@ from PIL import Image
 from vlnpilot.errors import ConfigError
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
+# Everything a run and its report write: what `overwrite` removes, and what marks a directory as holding a run.
+RUN_FILES = (SUMMARY, EPISODE, FRAMES, "report.html", "episode.mp4", "episode.gif")
+MAX_RECORDED_TEXT = 4_000  # characters of one model reply kept in a record (a decision is ~300)
+
+
+def cap_text(text: str | None, limit: int = MAX_RECORDED_TEXT) -> str | None:
+    """`text` cut to `limit` characters with a marker naming the original length (None stays None)."""
+    if text is None or len(text) <= limit:
+        return text
+    return f"{text[:limit]}... [cut: {len(text)} characters in all]"
+
+
+def claim_run_dir(out: str | Path, *, overwrite: bool = False) -> Path:
+    """A writable run directory that holds no other run: refused if it does, or cleared when `overwrite`."""
+    path = check_writable(out)
+    found = [name for name in RUN_FILES if (path / name).exists()]
+    if found and not overwrite:
+        raise ConfigError(f"--out {path} already holds a run ({', '.join(found)}); choose a new directory "
+                          "or pass --overwrite to replace it")
+    for name in found:
+        target = path / name
+        shutil.rmtree(target) if target.is_dir() else target.unlink()
+    return path
 
 
 def check_writable(out: str | Path) -> Path:
@@ -98,15 +125,17 @@ def write_json_atomic(path: Path, data: Any) -> None:
 class Recorder:
     """Writes one run directory. Used by the controller as a collaborator, never from inside `env.step()`."""
 
-    def __init__(self, run_dir: str | Path, *, jpeg_quality: int = 85, save_frames: bool = True):
-        self.run_dir = check_writable(run_dir)
+    def __init__(self, run_dir: str | Path, *, jpeg_quality: int = 85, save_frames: bool = True,
+                 overwrite: bool = False):
+        self.run_dir = claim_run_dir(run_dir, overwrite=overwrite)
+        self._summary: dict[str, Any] = {"status": "running"}
+        write_json_atomic(self.run_dir / SUMMARY, self._summary)  # first: never frames without a summary
         self.frames_dir = self.run_dir / FRAMES
         self.jpeg_quality = jpeg_quality
         self.save_frames = save_frames
         if save_frames:
             self.frames_dir.mkdir(exist_ok=True)
-        self._episode = open(self.run_dir / EPISODE, "a", encoding="utf-8")  # noqa: SIM115 (closed in close())
-        self._summary: dict[str, Any] = {}
+        self._episode = open(self.run_dir / EPISODE, "w", encoding="utf-8")  # noqa: SIM115 (closed in close())
 
     def frame_paths(self, step: int) -> dict[str, str]:
         return {"front": f"{FRAMES}/front_{step:03d}.jpg", "rear": f"{FRAMES}/rear_{step:03d}.jpg"}
@@ -128,6 +157,11 @@ class Recorder:
         write_json_atomic(self.run_dir / SUMMARY, self._summary)
 
     def step(self, record: dict[str, Any]) -> None:
+        decision = record.get("decision")
+        if isinstance(decision, dict) and isinstance(decision.get("description"), str):
+            decision = {**decision, "description": cap_text(decision["description"])}
+        record = {**record, "decision": decision, "raw_text": cap_text(record.get("raw_text")),
+                  "failures": [{**f, "raw_text": cap_text(f.get("raw_text"))} for f in record.get("failures") or []]}
         self._episode.write(json.dumps(_jsonable(record)) + "\n")
         self._episode.flush()
 
@@ -136,7 +170,11 @@ class Recorder:
         write_json_atomic(self.run_dir / SUMMARY, self._summary)
         self.close()
 
-    def close(self) -> None:
+    def close(self, status: str = "interrupted") -> None:
+        """Close the record; an episode that did not finish is marked `status` in summary.json."""
+        if self._summary.get("status") == "running":
+            self._summary = {**self._summary, "status": status}
+            write_json_atomic(self.run_dir / SUMMARY, self._summary)
         if not self._episode.closed:
             self._episode.close()
 
@@ -155,3 +193,12 @@ def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]
             except json.JSONDecodeError:
                 break
     return summary, steps
+
+
+TRIAL = "trial.json"  # beside a trial's summary.json: who flew it, when, how (see trials/README.md)
+
+
+def load_trial(run_dir: str | Path) -> dict[str, Any]:
+    """A trial's metadata (trial.json), or {} for a plain run."""
+    path = Path(run_dir) / TRIAL
+    return json.loads(path.read_text()) if path.is_file() else {}

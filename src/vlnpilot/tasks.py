@@ -49,6 +49,7 @@ def _mentions(text: str, names: tuple[str, ...]) -> int:
 
 def parse_query(query: str, scene: Scene) -> Task:
     """Turn a free-form query into a Task. Unknown rooms or objects raise QueryError listing the known ones."""
+    from vlnpilot.exits import shorten
     text = _norm(query)
     if not text:
         raise QueryError("the query is empty; try e.g. 'Go to the bedroom' or 'Find the mirror in the bedroom'")
@@ -65,9 +66,9 @@ def parse_query(query: str, scene: Scene) -> Task:
                              f"{scene.room(target.room).name}; known objects: {known_targets}")
         return Task(query=query, goal_room=target.room, goal_target=target.id)
     if wants_object:
-        raise QueryError(f"unknown object in {query!r}; known objects: {known_targets}")
+        raise QueryError(f"unknown object in {shorten(query)!r}; known objects: {known_targets}")
     if room is None:
-        raise QueryError(f"no known room in {query!r}; known rooms: {known_rooms}")
+        raise QueryError(f"no known room in {shorten(query)!r}; known rooms: {known_rooms}")
     return Task(query=query, goal_room=room.id)
 
 

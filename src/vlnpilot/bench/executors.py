@@ -146,6 +146,14 @@ def import_plugins(plugins: Sequence[str]) -> None:
             raise ConfigError(f"cannot import pilot plugin module {module!r}: {exc}") from None
 
 
+def _pilot_options(spec: EpisodeSpec) -> dict[str, Any]:
+    """The spec's pilot options, plus the row id for pilots that fly one recording per row (replay of trials)."""
+    from vlnpilot.pilots.base import parse_spec, pilot_factory
+
+    wants_row = getattr(pilot_factory(parse_spec(spec.pilot)[0]), "wants_row", False)
+    return {**spec.pilot_options, "row": spec.row} if wants_row else dict(spec.pilot_options)
+
+
 def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any]:
     """Fly and record one episode; the results.jsonl record (without the parent's fields)."""
     from vlnpilot.episode import EpisodeConfig, run_episode
@@ -155,7 +163,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     from vlnpilot.tasks import Task
 
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg)
-    pilot = TimedPilot(make_pilot(spec.pilot, **spec.pilot_options))
+    pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
         shutil.rmtree(run_dir)

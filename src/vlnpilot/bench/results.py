@@ -116,7 +116,8 @@ def wilson_interval(successes: int, n: int, z: float = Z95) -> tuple[float, floa
     denom = 1 + z2 / n
     center = (p + z2 / (2 * n)) / denom
     half = z / denom * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n))
-    return max(0.0, center - half), min(1.0, center + half)
+    # clamped around p: rounding may put a bound a hair on the wrong side of p (0/n, n/n)
+    return max(0.0, min(p, center - half)), min(1.0, max(p, center + half))
 
 
 def percentile(values: Sequence[float], q: float) -> float | None:

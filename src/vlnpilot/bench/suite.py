@@ -138,7 +138,10 @@ def load_suite(suite: str | Path) -> Suite:
     try:
         data = yaml.safe_load(text)
     except yaml.YAMLError as exc:
-        raise SuiteError(f"suite {source}: not valid YAML: {exc}") from None
+        mark = getattr(exc, "problem_mark", None)  # one line: where, and what (not the parser's context lines)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        what = " ".join(str(getattr(exc, "problem", None) or exc).split())
+        raise SuiteError(f"suite {source}: not valid YAML{where}: {what}") from None
     return suite_from_dict(data, source=source, default_name=default_name)
 
 

@@ -20,6 +20,7 @@ from typing import Any, ClassVar, Literal, TypeVar
 
 from vlnpilot import pricing
 from vlnpilot.errors import ConfigError
+from vlnpilot.pilots._gate import CallGate
 from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage
 
 log = logging.getLogger(__name__)
@@ -31,11 +32,16 @@ T = TypeVar("T")
 TRANSIENT_REASONS = frozenset({"rate_limited", "unavailable", "timeout", "connection_error"})
 # Reasons of a reply that arrived but cannot be used; the controller re-asks (at most twice).
 REPLY_REASONS = frozenset({"refusal", "content_filter", "truncated", "empty", "not_json", "missing_field",
-                           "invalid_enum", "invalid_value"})
+                           "invalid_enum", "invalid_value", "too_long"})
+# The provider says the model is unknown or gone (OpenAI 404 model_not_found, Gemini 404 "is not found",
+# a 400/410 for a shut-down model): said in one line with the current models of the price table.
+_MODEL_GONE = re.compile(r"model_not_found|does not exist|not found|no longer (available|supported)|deprecated|"
+                         r"retired|shut ?down|decommissioned|discontinued")
+_MODEL_FAMILIES = ("gpt-", "gemini-", "claude-")
 
 DEFAULT_TIMEOUT_S = 30.0
 DEFAULT_MAX_RETRIES = 2
-DEFAULT_MAX_OUTPUT_TOKENS = 512
+DEFAULT_MAX_OUTPUT_TOKENS = 512  # a decision is ~100 tokens: this caps the request too
 MAX_RETRY_AFTER_S = 60.0  # a server asking for a longer wait is not retried: the step would stall
 
 
@@ -198,6 +204,10 @@ def status_error(provider: str, status: int, message: str, *, key_env: str, mode
     if status == 403:
         return PilotError(f"the {provider} API refused access ({status}): the key in {key_env} may lack access to "
                           f"model {model!r}, or the region is not served{suffix}", fatal=True, reason="permission")
+    named = model is not None and (model.lower() in low or "model_not_found" in low)  # not another parameter
+    if status in (400, 404, 410) and named and _MODEL_GONE.search(low):
+        return PilotError(f"the {provider} API says model {model!r} is unknown or retired ({status}); "
+                          f"{current_models_hint(provider, model)}", fatal=True, reason="model_unavailable")
     if status == 404:
         return PilotError(f"the {provider} API does not know model {model!r} or the endpoint (404){suffix}",
                           fatal=True, reason="not_found")
@@ -213,6 +223,15 @@ def status_error(provider: str, status: int, message: str, *, key_env: str, mode
         return PilotError(f"the {provider} API is unavailable ({status}) and retries did not help{suffix}",
                           reason="unavailable")
     return PilotError(f"the {provider} API rejected the request ({status}){suffix}", fatal=True, reason="bad_request")
+
+
+def current_models_hint(provider: str, model: str) -> str:
+    """'current models of the price table (DATE): gpt-5, ...', of the model's own family (gpt-, gemini-, claude-)."""
+    prefix = next((p for p in _MODEL_FAMILIES if model.lower().startswith(p)), None)
+    models = [m for m in pricing.DEFAULT_PRICES if prefix and m.startswith(prefix) and m != model]
+    if not models:
+        return "pick another model"
+    return f"current models in the price table ({pricing.PRICES_AS_OF}): {', '.join(models)}"
 
 
 def timeout_error(provider: str, timeout_s: float) -> PilotError:
@@ -299,6 +318,7 @@ class ModelPilot:
             self._prices = prices
         else:
             self._prices = pricing.load_prices(prices)
+        self._gate = CallGate()  # subclasses hook it into their SDK's HTTP client (see cancel_pending)
         self.price_known = pricing.find_price(self.model, self._prices) is not None
         if not self.price_known and (self.provider, self.model) not in _UNPRICED_WARNED:
             _UNPRICED_WARNED.add((self.provider, self.model))  # once per model and process, not per pilot
@@ -308,11 +328,23 @@ class ModelPilot:
     def __repr__(self) -> str:  # never the key: the SDK client holds it, not us
         return f"{type(self).__name__}(model={self.model!r}, timeout={self.timeout:g})"
 
+    def cancel_pending(self) -> None:
+        """Abandon the calls in flight: no further HTTP request of theirs (SDK retries included) is sent."""
+        self._gate.cancel()
+
+    def close(self) -> None:
+        """Cancel what is in flight and close the SDK client (its connection pool)."""
+        self.cancel_pending()
+        close = getattr(getattr(self, "_client", None), "close", None)
+        if callable(close):
+            close()
+
     # -- the skeleton
     def decide(self, pilot_input: PilotInput) -> Decision:
         from vlnpilot.prompting import build_prompt
 
         prompt = build_prompt(pilot_input, jpeg_quality=self.jpeg_quality, max_side=self.max_side)
+        self._gate.enter()
         t0 = time.perf_counter()
         try:
             reply = self._call(prompt)
@@ -343,6 +375,7 @@ class ModelPilot:
     def _decision(self, reply: Reply, usage: Usage, pilot_input: PilotInput) -> Decision:
         import json
 
+        from vlnpilot.prompting import _MAX_TEXT as max_chars
         from vlnpilot.prompting import DecisionError, normalize_decision, parse_decision, validate_decision
 
         raw = reply.text if reply.data is None else json.dumps(reply.data, ensure_ascii=False)
@@ -362,6 +395,10 @@ class ModelPilot:
                        f"{reply.stop_detail}): raise max_output_tokens", "truncated")
         if raw is None or not raw.strip():
             raise fail(f"the {who} returned an empty reply ({reply.stop_detail or 'no content'})", "empty")
+        if len(raw) > max_chars:  # parse_decision searches only this far: say so, rather than "not JSON"
+            raise fail(f"the {who} reply is {len(raw)} characters long, over the {max_chars} a decision may "
+                       f"take (max_output_tokens is {self.max_output_tokens})", "too_long",
+                       f"your reply was {len(raw)} characters; answer with the short JSON object only")
         try:
             decision = parse_decision(raw)
         except DecisionError as exc:

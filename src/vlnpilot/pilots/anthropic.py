@@ -55,8 +55,9 @@ class AnthropicPilot(ModelPilot):
         self.cache = cache
         self.strict_tool = strict_tool
         self._secret = Secret(key)
+        http_client = anthropic_sdk.DefaultHttpxClient(event_hooks={"request": [self._gate.on_request]})
         self._client = anthropic_sdk.Anthropic(api_key=key, base_url=base_url, timeout=self.timeout,
-                                               max_retries=self.max_retries)
+                                               max_retries=self.max_retries, http_client=http_client)
         self.base_url = str(self._client.base_url)
 
     def __repr__(self) -> str:

@@ -2,7 +2,10 @@
 
 The answer schema goes as `response_json_schema` (plain JSON Schema) with `response_mime_type` JSON.
 Thinking is off by default (`thinking_budget=0`): it adds seconds per step to a decision that is a
-single move. google-genai's own retry (HttpRetryOptions) does not honour Retry-After or Google's
+single move. Each model family has its valid settings (THINKING): gemini-2.5-pro cannot switch thinking off,
+so "off" becomes its minimum budget; Gemini 3 takes a thinking level instead. Whenever the model may think,
+its thoughts count against max_output_tokens, so the answer gets its own budget on top.
+google-genai's own retry (HttpRetryOptions) does not honour Retry-After or Google's
 RetryInfo, so the SDK is told not to retry (attempts=1) and `call_with_retries` does it here.
 """
 
@@ -11,6 +14,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+from dataclasses import dataclass
 from typing import Any
 
 from google import genai
@@ -41,6 +45,50 @@ _FILTERED = {"SAFETY", "RECITATION", "BLOCKLIST", "PROHIBITED_CONTENT", "SPII", 
              "IMAGE_PROHIBITED_CONTENT", "MODEL_ARMOR", "LANGUAGE"}
 _MEDIA_RESOLUTIONS = {"low": "MEDIA_RESOLUTION_LOW", "medium": "MEDIA_RESOLUTION_MEDIUM",
                       "high": "MEDIA_RESOLUTION_HIGH"}
+
+
+@dataclass(frozen=True)
+class Thinking:
+    """The thinking budgets a model family accepts, per the Gemini API's "Thinking" guide (as of 2025; not
+    re-checked from this offline machine: a provider's 400 still names what it refuses)."""
+
+    can_disable: bool  # thinking_budget=0 is valid
+    min_budget: int
+    max_budget: int
+    uses_level: bool = False  # Gemini 3: thinking_level ("low", "high") rather than a budget
+
+
+# Longest prefix first. Unknown families are treated like gemini-2.5-flash.
+THINKING = {
+    "gemini-3": Thinking(can_disable=False, min_budget=0, max_budget=0, uses_level=True),
+    "gemini-2.5-flash-lite": Thinking(can_disable=True, min_budget=512, max_budget=24576),
+    "gemini-2.5-flash": Thinking(can_disable=True, min_budget=1, max_budget=24576),
+    "gemini-2.5-pro": Thinking(can_disable=False, min_budget=128, max_budget=32768),
+}
+DYNAMIC_THINKING_TOKENS = 8192  # output headroom when the model decides how long to think
+
+
+def thinking_rules(model: str) -> Thinking:
+    for prefix in sorted(THINKING, key=len, reverse=True):
+        if model.startswith(prefix):
+            return THINKING[prefix]
+    return THINKING["gemini-2.5-flash"]
+
+
+def thinking_settings(model: str, budget: int | None, level: str | None) -> tuple[dict[str, Any] | None, int]:
+    """(ThinkingConfig fields or None, output tokens to add for thoughts) for a model, a budget and a level."""
+    rules = thinking_rules(model)
+    if level is not None or (rules.uses_level and budget == 0):
+        return {"thinking_level": (level or "low").upper()}, DYNAMIC_THINKING_TOKENS
+    if budget is None or budget == -1:  # the model's default, or dynamic: it may think at length
+        return ({"thinking_budget": budget} if budget is not None else None), DYNAMIC_THINKING_TOKENS
+    if budget == 0 and not rules.can_disable:
+        return {"thinking_budget": rules.min_budget}, rules.min_budget  # as close to "off" as it goes
+    if budget != 0 and not rules.min_budget <= budget <= rules.max_budget:
+        off = "0 (off), " if rules.can_disable else ""
+        raise ConfigError(f"thinking_budget {budget} is invalid for {model}; valid: {off}-1 (dynamic) or "
+                          f"{rules.min_budget}..{rules.max_budget}")
+    return {"thinking_budget": budget}, budget
 
 
 @register_pilot("gemini")
@@ -77,6 +125,7 @@ class GeminiPilot(ModelPilot):
             raise ConfigError(f"media_resolution must be low, medium or high, got {media_resolution!r}")
         if thinking_budget is not None and not isinstance(thinking_budget, int):
             raise ConfigError(f"thinking_budget must be an integer (0 = off, -1 = dynamic), got {thinking_budget!r}")
+        self._thinking, self._thinking_tokens = thinking_settings(self.model, thinking_budget, thinking_level)
         key = resolve_api_key(api_key, self.key_envs, "Gemini")
         self.base_url = base_url or os.environ.get("GOOGLE_GEMINI_BASE_URL") or None
         self.thinking_budget = thinking_budget
@@ -87,6 +136,7 @@ class GeminiPilot(ModelPilot):
             base_url=self.base_url,
             timeout=max(1, round(self.timeout * 1000)),  # milliseconds
             retry_options=types.HttpRetryOptions(attempts=1),  # we retry, honouring Retry-After / RetryInfo
+            client_args={"event_hooks": {"request": [self._gate.on_request]}},  # abandoned calls send nothing
         )
         self._secret = Secret(key)
         self._client = genai.Client(api_key=key, vertexai=False, http_options=http_options)
@@ -96,19 +146,13 @@ class GeminiPilot(ModelPilot):
 
     # ------------------------------------------------------------ request
     def _config(self, prompt: Any) -> types.GenerateContentConfig:
-        thinking = None
-        if self.thinking_level is not None:
-            thinking = types.ThinkingConfig(thinking_level=self.thinking_level.upper())
-        elif self.thinking_budget is not None:
-            thinking = types.ThinkingConfig(thinking_budget=self.thinking_budget)
-        budget = self.thinking_budget if self.thinking_level is None else None
-        extra_thinking = budget if budget is not None and budget > 0 else 0
+        thinking = types.ThinkingConfig(**self._thinking) if self._thinking is not None else None
         config: dict[str, Any] = {
             "system_instruction": prompt.system,
             "response_mime_type": "application/json",
             "response_json_schema": prompt.schema,
             # Gemini counts thinking tokens against max_output_tokens: leave the answer its own budget.
-            "max_output_tokens": self.max_output_tokens + extra_thinking,
+            "max_output_tokens": self.max_output_tokens + self._thinking_tokens,
             "thinking_config": thinking,
         }
         if self.temperature is not None:

@@ -16,6 +16,7 @@ import base64
 import logging
 import os
 from typing import Any, Literal
+from urllib.parse import urlsplit
 
 import openai as openai_sdk
 
@@ -27,8 +28,11 @@ log = logging.getLogger(__name__)
 
 ResponseFormat = Literal["auto", "json_schema", "json_object", "none"]
 SCHEMA_NAME = "vln_pilot_decision"
-_FORMAT_HINTS = ("response_format", "json_schema", "schema", "structured", "grammar", "not supported",
-                 "unsupported", "json_object")
+# A 400 that means "no structured output here" names response_format / json_schema (OpenAI: param
+# "response_format"; vLLM, Ollama, llama.cpp: "json_schema ... not supported"). "Unsupported value: 'temperature'"
+# or "Unsupported parameter: 'max_tokens'" do not: they must not switch structured output off.
+_FORMAT_PARAMS = ("response_format", "json_schema", "structured output", "structured_output", "guided_json")
+OFFICIAL_HOST = "api.openai.com"
 
 
 @register_pilot("openai")
@@ -67,18 +71,20 @@ class OpenAIPilot(ModelPilot):
             raise ConfigError(f"response_format must be auto, json_schema, json_object or none, "
                               f"got {response_format!r}")
         self.base_url = base_url or os.environ.get("OPENAI_BASE_URL") or None
-        if self.base_url is not None and "api.openai.com" not in self.base_url:
+        official = is_official(self.base_url)
+        if not official:
             self.provider = "OpenAI-compatible"
         # A local server needs no key; the official API does (a missing key is fatal and names the env var).
-        key = resolve_api_key(api_key, self.key_envs, "OpenAI", optional=self.base_url is not None) or "EMPTY"
+        key = resolve_api_key(api_key, self.key_envs, "OpenAI", optional=not official) or "EMPTY"
         self.detail = detail
         self.response_format = response_format
         self._format = "json_schema" if response_format == "auto" else response_format
-        self.max_tokens_param = max_tokens_param or ("max_tokens" if self.base_url else "max_completion_tokens")
+        self.max_tokens_param = max_tokens_param or ("max_completion_tokens" if official else "max_tokens")
         self.extra_body = dict(extra_body or {})
         self._secret = Secret(key)
         self._client = openai_sdk.OpenAI(api_key=key, base_url=self.base_url, timeout=self.timeout,
-                                         max_retries=self.max_retries)
+                                         max_retries=self.max_retries, http_client=openai_sdk.DefaultHttpxClient(
+                                             event_hooks={"request": [self._gate.on_request]}))
 
     def __repr__(self) -> str:
         return f"OpenAIPilot(model={self.model!r}, base_url={self.base_url!r}, detail={self.detail!r})"
@@ -133,8 +139,18 @@ class OpenAIPilot(ModelPilot):
 
 
 def _rejects_format(exc: BaseException) -> bool:
-    text = f"{getattr(exc, 'message', '')} {getattr(exc, 'body', '')}".lower()
-    return any(hint in text for hint in _FORMAT_HINTS)
+    body = getattr(exc, "body", None)
+    err = body.get("error", body) if isinstance(body, dict) else None
+    param = str(err.get("param") or "") if isinstance(err, dict) else ""
+    if param:  # the API names the parameter it rejects
+        return param.startswith("response_format")
+    text = f"{getattr(exc, 'message', '')} {body or ''}".lower()
+    return any(hint in text for hint in _FORMAT_PARAMS)
+
+
+def is_official(base_url: str | None) -> bool:
+    """No address, or the official API's own address (then the official rules apply: a key, max_completion_tokens)."""
+    return base_url is None or urlsplit(base_url).hostname == OFFICIAL_HOST
 
 
 def _reply(response: Any) -> Reply:

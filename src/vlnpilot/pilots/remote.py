@@ -27,6 +27,7 @@ from vlnpilot.pilots._common import (
     status_error,
     timeout_error,
 )
+from vlnpilot.pilots._gate import CallCancelled, CallGate
 from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
 
 URL_ENV = "VLN_PILOT_URL"
@@ -84,12 +85,19 @@ class RemotePilot:
         self.max_side = max_side
         token = token or os.environ.get(TOKEN_ENV) or None
         headers = {"Authorization": f"Bearer {token}"} if token else {}
-        self._client = httpx.Client(base_url=self.url, timeout=self.timeout, headers=headers, transport=transport)
+        self._gate = CallGate()  # abandoned calls send nothing more (see cancel_pending)
+        self._client = httpx.Client(base_url=self.url, timeout=self.timeout, headers=headers, transport=transport,
+                                    event_hooks={"request": [self._gate.on_request]})
 
     def __repr__(self) -> str:
         return f"RemotePilot(url={self.url!r}, model={self.model!r})"
 
+    def cancel_pending(self) -> None:
+        """Abandon the calls in flight: none of them sends another request (retries included)."""
+        self._gate.cancel()
+
     def close(self) -> None:
+        self.cancel_pending()
         self._client.close()
 
     def _payload(self, pilot_input: PilotInput) -> dict[str, Any]:
@@ -123,6 +131,7 @@ class RemotePilot:
 
     def decide(self, pilot_input: PilotInput) -> Decision:
         payload = self._payload(pilot_input)
+        self._gate.enter()
         t0 = time.perf_counter()
         try:
             response = call_with_retries(lambda: self._post(payload), classify=self._classify,
@@ -134,6 +143,8 @@ class RemotePilot:
             raise timeout_error(f"pilot server at {self.url}", self.timeout) from None
         except httpx.TransportError as exc:
             raise connection_error("pilot server", self.url, exc) from None
+        except CallCancelled as exc:
+            raise PilotError(str(exc), reason="cancelled") from None
         latency = time.perf_counter() - t0
         if response.status_code == 200:
             try:

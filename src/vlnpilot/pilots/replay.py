@@ -12,10 +12,11 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from vlnpilot.context import context_name
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots.base import Decision, PilotError, PilotInput, register_pilot
 from vlnpilot.prompting import DecisionError, parse_decision
-from vlnpilot.record import load_run
+from vlnpilot.record import load_run, load_trial
 
 _MALFORMED = "malformed answer: "
 _INVALID_PREFIXES = ("movement ", "next state ")  # validate_decision's reasons
@@ -30,20 +31,40 @@ class ReplayPilot:
     """
 
     name = "replay"
+    wants_row = True  # the bench passes the suite row's id: a set of trials holds one recording per row
 
-    def __init__(self, model: str | None = None, *, run_dir: str | Path | None = None, strict: bool = False):
+    def __init__(self, model: str | None = None, *, run_dir: str | Path | None = None, strict: bool = False,
+                 row: str | None = None):
         source = run_dir if run_dir is not None else model
         if source is None:
             raise ConfigError("the replay pilot needs a recorded run: use --pilot replay:RUN_DIR "
                               "(or make_pilot('replay', run_dir=...))")
-        self.run_dir = Path(source)
+        self.run_dir = _recording(Path(source), row)
         self.strict = strict
         summary, steps = load_run(self.run_dir)
         self.summary = summary
+        self.trial = load_trial(self.run_dir)
         self.steps: dict[int, dict[str, Any]] = {int(rec["step"]): rec for rec in steps if "step" in rec}
         self.model = f"replay:{self.run_dir}"
         self._step: int | None = None
         self._attempt = 0
+
+    def episode_started(self, scene: Any, config: Any) -> None:
+        """Refuse to replay on another scene or with other settings: the outcome could not be reproduced."""
+        flown = self.trial.get("scene") or self.summary.get("scene")
+        mark = self.trial.get("scene_fingerprint") or self.summary.get("provenance", {}).get("scene_fingerprint")
+        if flown != scene.name or (mark is not None and mark != scene.fingerprint()):
+            raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
+                              f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}")
+        recorded = self.summary.get("config", {})
+        # What decides the outcome of the same answers (a longer step limit only runs the recording out).
+        now = {"profile": config.profile, "shield": config.shield, "context": context_name(config.context)}
+        context = (recorded.get("context") or {}).get("preset", "paper")  # recordings before contexts: paper
+        then = {"profile": recorded.get("profile"), "shield": recorded.get("shield"), "context": context}
+        differ = [f"--{key.replace('_', '-')} {then[key]}" for key in now
+                  if then[key] is not None and str(then[key]) != str(now[key])]
+        if differ:
+            raise ConfigError(f"{self.run_dir} was flown with other settings; replay it with {' '.join(differ)}")
 
     @property
     def last_step(self) -> int:
@@ -102,3 +123,16 @@ class ReplayPilot:
             raise DecisionError(reason)
         kind, _, message = reason.partition(": ")
         raise PilotError(message or reason, fatal=False, reason=kind if message else "pilot_error")
+
+
+def _recording(source: Path, row: str | None) -> Path:
+    """A run directory, or a set of trials (one recording per suite row: SET/ROW/) and the row to replay."""
+    trials = sorted(p.name for p in source.iterdir() if (p / "summary.json").is_file()) if source.is_dir() else []
+    if (source / "summary.json").is_file() or not trials:
+        return source  # load_run explains a missing recording
+    if row is None:
+        raise ConfigError(f"{source} is a set of trials: replay it with its suite, e.g. vln-pilot bench --suite "
+                          f"{source}/suite.yaml --pilots replay:{source}, or give one trial: replay:{source}/ROW")
+    if row not in trials:
+        raise ConfigError(f"{source} has no trial for row {row!r}; its trials: {', '.join(trials)}")
+    return source / row

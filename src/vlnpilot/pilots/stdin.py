@@ -11,9 +11,11 @@ The controller validates the answer exactly as it validates a model's, and re-as
 
 from __future__ import annotations
 
+import shutil
 import sys
 import tempfile
 import time
+import weakref
 from pathlib import Path
 from typing import IO, Any
 
@@ -44,8 +46,9 @@ class StdinPilot:
         self._input, self._output = input, output
         self.jpeg_quality = jpeg_quality
         self.show_system = show_system
-        if image_dir is None:
+        if image_dir is None:  # ours: removed when the pilot is closed, collected, or the process exits
             image_dir = tempfile.mkdtemp(prefix="vlnpilot-stdin-")
+            self.close = weakref.finalize(self, shutil.rmtree, image_dir, ignore_errors=True)
         self.image_dir = Path(image_dir)
         try:
             self.image_dir.mkdir(parents=True, exist_ok=True)

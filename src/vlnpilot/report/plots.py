@@ -153,8 +153,8 @@ def plot_success_rates(pilots: Sequence[str], successes: Sequence[int], totals: 
         ax = fig.add_subplot()
         rates = [k / n if n else 0.0 for k, n in zip(successes, totals, strict=True)]
         ci = [wilson_interval(k, n) for k, n in zip(successes, totals, strict=True)]
-        lo = [r - c[0] for r, c in zip(rates, ci, strict=True)]
-        hi = [c[1] - r for r, c in zip(rates, ci, strict=True)]
+        lo = [max(0.0, r - c[0]) for r, c in zip(rates, ci, strict=True)]  # never negative (matplotlib refuses)
+        hi = [max(0.0, c[1] - r) for r, c in zip(rates, ci, strict=True)]
         x = np.arange(len(pilots))
         ax.bar(x, rates, width=0.6, color=[pilot_color(i) for i in range(len(pilots))], zorder=2)
         ax.errorbar(x, rates, yerr=[lo, hi], fmt="none", ecolor="#222", capsize=6, linewidth=1.2, zorder=3)

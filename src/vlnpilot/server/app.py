@@ -4,46 +4,50 @@
 state, previous movement) plus the FSM profile and controller feedback, asks a pilot, and returns
 its Decision. `GET /healthz` says the server is up; the OpenAPI docs are at /docs.
 
-Errors are JSON (`ErrorBody`), never a traceback: 401 bad/missing bearer token, 413 body too large,
-422 bad field or image, 502 the provider failed or its reply was unusable, 503 the provider is
-unavailable or rate limiting. `reason` and `fatal` carry the pilot's own PilotError fields, so the
-`remote` pilot can raise the same error on the client side.
+Errors are JSON (`ErrorBody`), never a traceback: 401 bad/missing bearer token, 403 a pilot this server
+does not serve (the body lists the allowed SPECs), 413 body too large, 415 not JSON, 422 bad field or image,
+502 the provider failed or its reply was unusable, 503 the provider is unavailable or rate limiting.
+`reason` and `fatal` carry the pilot's own PilotError fields, so the `remote` pilot can raise the same error
+on the client side.
 """
 
 from __future__ import annotations
 
 import base64
 import binascii
+import contextlib
 import hmac
 import io
+import ipaddress
 import logging
 import os
-import threading
-from collections.abc import Callable, Collection
-from typing import Any, Literal
+import re
+from collections.abc import AsyncIterator, Callable, Collection
+from typing import Annotated, Any, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from vlnpilot.commands import COMMANDS, get_command
-from vlnpilot.errors import UnknownNameError, VLNPilotError
+from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
 from vlnpilot.fsm import PROFILES, State, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
-from vlnpilot.pilots.base import DOOR_POSITIONS, Pilot, PilotError, PilotInput, Usage, make_pilot, parse_spec
+from vlnpilot.pilots.base import DOOR_POSITIONS, Pilot, PilotError, PilotInput, Usage, make_pilot
+from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, refuse_privileged
 
 log = logging.getLogger(__name__)
 
 TOKEN_ENV = "VLN_PILOT_TOKEN"
 DEFAULT_MAX_BODY_BYTES = 8 * 1024 * 1024
 MAX_IMAGE_SIDE = 4096
-# Pilots a client may pick by default: the model pilots. `stdin` would block the server, `oracle` needs
-# ground truth the server does not have, `remote` could loop back.
-DEFAULT_ALLOWED_PILOTS = ("openai", "gemini", "anthropic")
+# What an image must look like: base64 of a JPEG (/9j/) or a PNG (iVBORw0KGgo), optionally as a data: URL.
+# In the schema too, so that the documented contract and the validation agree.
+IMAGE_PATTERN = r"^(data:image/(jpeg|png);base64,)?(/9j/|iVBORw0KGgo)[A-Za-z0-9+/=_\-\s]*$"
 
 
 # ------------------------------------------------------------------------------------------ wire models
@@ -62,6 +66,14 @@ CommandCode = Literal[tuple(COMMANDS)]  # type: ignore[valid-type]
 Profile = Literal[PROFILES]  # type: ignore[valid-type]
 
 
+def _whole_float_to_int(value: Any) -> Any:
+    """JSON Schema's "integer" includes 7.0; strict pydantic would refuse it, so the two disagreed."""
+    return int(value) if isinstance(value, float) and value.is_integer() else value
+
+
+WholeNumber = Annotated[int, BeforeValidator(_whole_float_to_int)]
+
+
 class DecideRequest(BaseModel):
     """One step's inputs (the paper's five, plus the FSM profile, controller feedback and the pilot to ask)."""
 
@@ -71,7 +83,8 @@ class DecideRequest(BaseModel):
                             "edges": [{"from": "hall", "to": "kitchen"}]},
         "previous_movement": None}]})
 
-    image: str = Field(description="front camera image: base64 JPEG or PNG (a data: URL is accepted)", min_length=1)
+    image: str = Field(description="front camera image: base64 JPEG or PNG (a data: URL is accepted)",
+                       min_length=8, pattern=IMAGE_PATTERN, json_schema_extra={"format": "base64-image"})
     query: str = Field(description="the user's query", min_length=1, max_length=2000)
     topological_map: dict[str, Any] = Field(description="rooms (nodes) and open doors (edges), as JSON")
     state: AskedState = Field(description="current FSM state (Start and Final are never asked)")
@@ -79,7 +92,7 @@ class DecideRequest(BaseModel):
     profile: Profile = Field(default="paper", description="FSM profile: which moves each state allows")
     feedback: list[str] = Field(default_factory=list, description="controller feedback lines for a re-ask",
                                 max_length=20)
-    step: int = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
+    step: WholeNumber = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
     pilot: str | None = Field(default=None, description="pilot SPEC (name or name:model); default: the server's",
                               max_length=200)
 
@@ -126,7 +139,7 @@ def _error_response(status: int, body: ErrorBody, headers: dict[str, str] | None
     return JSONResponse(status_code=status, content=body.model_dump(mode="json", exclude_none=True), headers=headers)
 
 
-_ERRORS = {code: {"model": ErrorBody} for code in (400, 401, 413, 422, 502, 503)}
+_ERRORS = {code: {"model": ErrorBody} for code in (400, 401, 403, 413, 415, 422, 502, 503)}
 
 
 # ------------------------------------------------------------------------------------------ body limit
@@ -220,8 +233,12 @@ def decode_image(data: str) -> np.ndarray:
     except ApiError:
         raise
     except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
-        raise ApiError(422, f"image cannot be decoded as {kind}: {exc}", "bad_image") from None
+        why = _OBJECT_REPR.sub("the image", str(exc)) or type(exc).__name__  # no '<_io.BytesIO object at 0x...>'
+        raise ApiError(422, f"image cannot be decoded as {kind}: {why}", "bad_image") from None
     return np.ascontiguousarray(rgb)
+
+
+_OBJECT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
 
 
 def _pilot_input(req: DecideRequest) -> PilotInput:
@@ -260,28 +277,35 @@ def create_app(
     pilot_spec: str = "openai",
     allowed_pilots: Collection[str] | None = None,
     pilot_options: dict[str, Any] | None = None,
+    max_cached_pilots: int = DEFAULT_MAX_CACHED,
 ) -> FastAPI:
     """The pilot server as an ASGI app.
 
-    `pilot_factory(spec, **pilot_options)` builds a pilot (once per spec, then reused across requests);
-    `pilot_spec` is the default when a request names none; a request may name another pilot whose
-    name is in `allowed_pilots` (default: openai, gemini, anthropic and the default's name).
-    `token`: if set, every /v1 request needs `Authorization: Bearer <token>` (None: no auth).
+    `pilot_factory(spec, **pilot_options)` builds a pilot (on first use, then kept in a bounded cache that
+    closes what it evicts); `pilot_spec` is the default when a request names none; a request may name another
+    SPEC only if it is in `allowed_pilots` ('openai' and 'openai:gpt-4.1' are the same SPEC); anything else
+    gets 403. Pilots that need ground truth (the oracle) are refused with a ConfigError.
+    `token`: if set, every /v1 request needs `Authorization: Bearer <token>` (None: no auth, and the OpenAPI
+    document declares none).
     """
-    default_name, _ = parse_spec(pilot_spec)
-    allowed = {parse_spec(p)[0] for p in (allowed_pilots if allowed_pilots is not None else DEFAULT_ALLOWED_PILOTS)}
-    allowed.add(default_name)
-    options = dict(pilot_options or {})
-    pilots: dict[str, Pilot] = {}
-    lock = threading.Lock()
+    refuse_privileged([pilot_spec, *(allowed_pilots or ())])
+    pool = PilotPool(pilot_factory, [pilot_spec, *(allowed_pilots or ())], pilot_options, max_cached_pilots)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(app: FastAPI) -> AsyncIterator[None]:
+        yield
+        pool.close()  # the SDK clients' sockets and pools
 
     app = FastAPI(
+        lifespan=lifespan,
         title="VLN-Pilot server",
         version="1",
         description="Ask a vision-language pilot for the next drone movement (the paper's VLLM server).",
     )
     app.add_middleware(BodyLimitMiddleware, max_bytes=max_body_bytes)
     app.state.pilot_spec = pilot_spec
+    app.state.pilots = pool
+    _document_allowed_pilots(app, pool.allowed)
     bearer = HTTPBearer(auto_error=False, description=f"the server's token (env {TOKEN_ENV})")
 
     def check_token(credentials: HTTPAuthorizationCredentials | None = Depends(bearer)) -> None:  # noqa: B008
@@ -292,25 +316,19 @@ def create_app(
             raise ApiError(401, "missing or wrong bearer token" + (f" (set {TOKEN_ENV} on the client)"),
                            "unauthorized", fatal=True, headers={"WWW-Authenticate": "Bearer"})
 
-    def get_pilot(spec: str | None) -> Pilot:
-        spec = (spec or pilot_spec).strip()
-        name, _ = parse_spec(spec)
-        if name not in allowed:
-            raise ApiError(422, f"pilot {name!r} is not allowed on this server; allowed: {', '.join(sorted(allowed))}",
-                           "bad_pilot")
-        with lock:
-            pilot = pilots.get(spec)
-            if pilot is None:
-                try:
-                    pilot = pilot_factory(spec, **options)
-                except UnknownNameError as exc:
-                    raise ApiError(422, str(exc), "bad_pilot") from None
-                except PilotError as exc:
-                    raise _pilot_error(exc) from None
-                except VLNPilotError as exc:
-                    raise ApiError(422, f"cannot build pilot {spec!r}: {exc}", "bad_pilot") from None
-                pilots[spec] = pilot
-            return pilot
+    def get_pilot(requested: str | None) -> Pilot:
+        spec = pool.resolve((requested or pilot_spec).strip())
+        if spec is None:
+            raise ApiError(403, f"pilot {(requested or '')[:80]!r} is not served here; allowed: "
+                                f"{', '.join(pool.allowed)}", "pilot_not_allowed", fatal=True)
+        try:
+            return pool.get(spec)
+        except UnknownNameError as exc:
+            raise ApiError(422, str(exc), "bad_pilot") from None
+        except PilotError as exc:
+            raise _pilot_error(exc) from None
+        except VLNPilotError as exc:
+            raise ApiError(422, f"cannot build pilot {spec!r}: {exc}", "bad_pilot") from None
 
     @app.exception_handler(ApiError)
     async def _api_error(request: Request, exc: ApiError) -> JSONResponse:
@@ -319,6 +337,11 @@ def create_app(
 
     @app.exception_handler(RequestValidationError)
     async def _validation_error(request: Request, exc: RequestValidationError) -> JSONResponse:
+        content_type = request.headers.get("content-type", "")
+        if request.method == "POST" and content_type and not _is_json(content_type):
+            return _error_response(415, ErrorBody(detail=f"expected Content-Type: application/json, got "
+                                                         f"{content_type[:80] or 'none'!r}",
+                                                  reason="unsupported_media_type", fatal=True))
         errors = [{"loc": [str(p) for p in e.get("loc", ())], "msg": str(e.get("msg", "")), "type": str(e.get("type"))}
                   for e in exc.errors()]
         detail = "; ".join(f"{'.'.join(e['loc'][1:]) or 'body'}: {e['msg']}" for e in errors) or "invalid request"
@@ -340,7 +363,7 @@ def create_app(
         return Health(status="ok", pilot=pilot_spec)
 
     @app.post("/v1/decide", response_model=DecideResponse, responses=_ERRORS, tags=["pilot"],
-              dependencies=[Depends(check_token)])
+              dependencies=[Depends(check_token)] if token is not None else [])  # declare auth only when it is on
     def decide(req: DecideRequest) -> DecideResponse:
         """Ask the pilot for one decision (a blocking provider call, run in the worker thread pool)."""
         pilot_input = _pilot_input(req)
@@ -360,6 +383,26 @@ def create_app(
     return app
 
 
+def _document_allowed_pilots(app: FastAPI, allowed: list[str]) -> None:
+    """List the served SPECs as the `pilot` field's enum in the OpenAPI document (validation answers 403)."""
+    generate = app.openapi
+
+    def openapi() -> dict[str, Any]:
+        if app.openapi_schema is None:
+            schema = generate()
+            for option in schema["components"]["schemas"]["DecideRequest"]["properties"]["pilot"].get("anyOf", []):
+                if option.get("type") == "string":
+                    option["enum"] = list(allowed)
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
+
+def _is_json(content_type: str) -> bool:
+    media = content_type.split(";")[0].strip().lower()
+    return media == "application/json" or (media.startswith("application/") and media.endswith("+json"))
+
+
 def _pilot_error(exc: PilotError) -> ApiError:
     status = 503 if exc.reason in TRANSIENT_REASONS else 502
     extra: dict[str, Any] = {}
@@ -368,6 +411,16 @@ def _pilot_error(exc: PilotError) -> ApiError:
     if isinstance(getattr(exc, "usage", None), Usage):
         extra["usage"] = exc.usage  # type: ignore[attr-defined]
     return ApiError(status, redact(exc), exc.reason, fatal=exc.fatal, **extra)
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 and localhost; anything else (0.0.0.0, a LAN address, a name) may be reachable."""
+    if host.strip().lower() == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
 
 
 def app_from_env() -> FastAPI:
@@ -382,8 +435,8 @@ def serve(host: str = "127.0.0.1", port: int = 8000, pilot_spec: str = "openai",
     import uvicorn
 
     token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
-    if token is None and host not in ("127.0.0.1", "localhost", "::1"):
-        log.warning("serving on %s without a token: anyone who reaches it can spend your API credit; set %s",
-                    host, TOKEN_ENV)
+    if token is None and not is_loopback(host):
+        raise ConfigError(f"serving on {host} without a token would let anyone who reaches it spend your API "
+                          f"credit; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or bind --host 127.0.0.1")
     app = create_app(token=token, pilot_spec=pilot_spec, **app_options)
     uvicorn.run(app, host=host, port=port, log_level=log_level)

@@ -1,0 +1,93 @@
+"""Add a recorded real-VLM episode to a set of trials under trials/, and rewrite the set's suite.yaml.
+
+    python scripts/import_trial.py RUN_DIR trials/after-plus living-bathroom-1 \
+        --flown-by "..." --interface stdin [--scene cabin-v1] [--account report.md]
+
+Copies the run's summary.json and episode.jsonl (not the frames: the simulator is deterministic, and a replay
+regenerates them), writes trial.json (who flew it, when, through which interface, the scene and prompt versions)
+and the pilot's own account of the episode, then lists every trial of the set as a row of its suite.yaml, so that
+`vln-pilot bench --suite SET/suite.yaml --pilots replay:SET` replays the whole set.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import yaml
+
+from vlnpilot.record import load_run
+from vlnpilot.scene import load_scene
+
+
+def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, interface: str, scene: str | None,
+                 account: Path | None) -> Path:
+    summary, _ = load_run(run_dir)
+    dest = set_dir / row
+    dest.mkdir(parents=True, exist_ok=False)
+    for name in ("summary.json", "episode.jsonl"):
+        shutil.copy2(run_dir / name, dest / name)
+    scene_name = scene or summary["scene"]  # a baseline flown before a scene was renamed names it here
+    trial = {
+        "flown_by": flown_by,
+        "interface": interface,
+        "started_at": summary["provenance"]["started_at"],
+        "scene": scene_name,
+        "scene_fingerprint": load_scene(scene_name).fingerprint(),
+        "prompt_hash": summary["provenance"]["prompt_hash"],
+        "git_sha": summary["provenance"]["git_sha"],
+        "context": (summary["config"].get("context") or {}).get("preset", "paper"),
+        "shield": summary["config"]["shield"],
+        "outcome": summary["result"]["outcome"],
+        "steps": summary["result"]["steps"],
+    }
+    (dest / "trial.json").write_text(json.dumps(trial, indent=2) + "\n")
+    if account is not None:
+        shutil.copy2(account, dest / "account.md")
+    write_suite(set_dir)
+    return dest
+
+
+def write_suite(set_dir: Path) -> Path:
+    """One suite row per trial of the set (one repetition each), with the set's common settings."""
+    trials = sorted(p for p in set_dir.iterdir() if (p / "trial.json").is_file())
+    rows, scenes, limits, profiles = [], set(), set(), set()
+    for path in trials:
+        summary, _ = load_run(path)
+        trial = json.loads((path / "trial.json").read_text())
+        task = summary["task"]
+        goal = {"room": task["goal_room"], **({"target": task["goal_target"]} if task["goal_target"] else {})}
+        rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], "goal": goal})
+        scenes.add(trial["scene"])
+        limits.add(summary["config"]["max_steps"])
+        profiles.add(summary["config"]["profile"])
+    if len(scenes) != 1 or len(limits) != 1 or len(profiles) != 1:
+        raise SystemExit(f"{set_dir}: a set of trials shares one scene, step limit and profile; "
+                         f"found {sorted(scenes)}, {sorted(limits)}, {sorted(profiles)}")
+    suite = {"name": set_dir.name, "description": f"Replays the real-VLM trials of {set_dir.name}, one row each.",
+             "scene": scenes.pop(), "repetitions": 1, "max_steps": limits.pop(), "seed": 0,
+             "profile": profiles.pop(), "rows": rows}
+    path = set_dir / "suite.yaml"
+    path.write_text(yaml.safe_dump(suite, sort_keys=False, allow_unicode=True))
+    return path
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("run_dir", type=Path)
+    parser.add_argument("set_dir", type=Path)
+    parser.add_argument("row")
+    parser.add_argument("--flown-by", required=True)
+    parser.add_argument("--interface", required=True, choices=["stdin", "files"])
+    parser.add_argument("--scene", help="the scene's current name, if it was renamed since the trial was flown")
+    parser.add_argument("--account", type=Path, help="the pilot's own account of the episode (markdown)")
+    args = parser.parse_args()
+    dest = import_trial(args.run_dir, args.set_dir, args.row, flown_by=args.flown_by, interface=args.interface,
+                        scene=args.scene, account=args.account)
+    print(f"wrote {dest}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,40 @@
+"""Exit codes of `vln-pilot` and the checks of command-line values that a framework cannot express.
+
+    0    an episode (or every episode of a bench) was flown to an outcome: success, collision, step limit...
+    2    bad input: one line on stderr names the problem and the valid choices
+    3    a pilot or provider failure: an episode ended in `pilot_error` (a rejected key, an unknown model...)
+    130  interrupted (Ctrl-C or SIGTERM); what was recorded is kept and summary.json says "interrupted"
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from urllib.parse import urlsplit
+
+from vlnpilot.errors import ConfigError
+
+OK = 0
+BAD_INPUT = 2
+PILOT_ERROR = 3
+INTERRUPTED = 130
+
+
+def exit_code_for(outcomes: Iterable[str]) -> int:
+    """PILOT_ERROR when any episode ended in `pilot_error`, else OK."""
+    return PILOT_ERROR if any(o == "pilot_error" for o in outcomes) else OK
+
+
+def check_base_url(url: str | None, option: str = "--base-url") -> str | None:
+    """`url` if it is an http(s) URL with a host, else ConfigError naming the option (None passes)."""
+    if url is None:
+        return None
+    parts = urlsplit(url.strip())
+    if parts.scheme not in ("http", "https") or not parts.hostname:
+        raise ConfigError(f"{option} must be an http:// or https:// URL with a host, e.g. http://127.0.0.1:8000/v1; "
+                          f"got {shorten(url)!r}")
+    return url.strip()
+
+
+def shorten(text: str, limit: int = 80) -> str:
+    """`text` cut to `limit` characters with its full length, for quoting user input in an error line."""
+    return text if len(text) <= limit else f"{text[:limit]}... ({len(text)} characters)"
