@@ -28,11 +28,12 @@ RECOGNISABLE = {"living_room": ("_tv_", "_sofa_"), "kitchen": ("_fridge_", "_cou
                 "hallway": ("_plant_",)}
 
 
-def test_200_seeds_all_pass_validation_within_the_attempt_limit() -> None:
+@pytest.mark.parametrize("rooms", [None, 2, 3, 4, 5, 6])
+def test_200_seeds_all_pass_validation_within_the_attempt_limit(rooms: int | None) -> None:
     generate_house.cache_clear()
     sub_seeds = []
     for seed in range(200):
-        scene = generate_house(seed)  # raises HouseGenerationError when all MAX_ATTEMPTS sub-seeds fail
+        scene = generate_house(seed, rooms=rooms)  # raises HouseGenerationError when all sub-seeds fail
         validate(scene)
         sub_seeds.append(int(scene.description.rsplit("sub-seed ", 1)[1].rstrip(").")))
     assert max(sub_seeds) < MAX_ATTEMPTS == 5

@@ -21,6 +21,7 @@ DOOR_KEEP_DEPTH, DOOR_KEEP_SIDE = 1.3, 0.3  # in front of an open door; a closed
 CLOSED_KEEP_DEPTH = 0.6
 SHALLOW_M = 0.4  # pieces reaching flight altitude no further than this from the wall may share a door's wall
 FLIGHT_BAND = (0.9, 1.1)  # heights at which a solid is an obstacle for the drone
+PLACE_TRIES, REQUIRED_EXTRA_TRIES = 40, 120  # random placements tried per piece; more for a required one
 VIEW_M = 0.7  # the oracle's viewing distance in front of a target (pilots.oracle.OraclePilot.view_m)
 Rect = tuple[float, float, float, float]  # xmin, ymin, xmax, ymax
 
@@ -109,7 +110,7 @@ def furnish_room(rng: random.Random, plan: Plan, r: PlanRoom, programme: str) ->
     for i, (kind, target, required) in enumerate(PROGRAMMES[programme]):
         if not required and rng.random() < 0.35:
             continue
-        placed = _place(rng, r, frames, door_sides, keep, out, kind, f"{r.id}_{kind}_{i}", target)
+        placed = _place(rng, r, frames, door_sides, keep, out, kind, f"{r.id}_{kind}_{i}", target, required)
         if placed is None and required:
             raise FurnishError(f"no room for the {kind} in the {r.id} ({r.x1 - r.x0:.1f} x {r.y1 - r.y0:.1f} m)")
     if r.kind in CENTREPIECES and rng.random() < 0.8:
@@ -118,12 +119,13 @@ def furnish_room(rng: random.Random, plan: Plan, r: PlanRoom, programme: str) ->
 
 
 def _place(rng: random.Random, r: PlanRoom, frames: dict[str, WallFrame], door_sides: set[str], keep: list[Rect],
-           out: Furnished, kind: str, name: str, target: str | None) -> Piece | None:
+           out: Furnished, kind: str, name: str, target: str | None, required: bool = False) -> Piece | None:
+    """Try random walls and positions; a required piece gets more tries, at its smallest width."""
     builder, (w_lo, w_hi) = FURNITURE[kind]
     room = interior(r)
-    for _ in range(40):
+    for attempt in range(PLACE_TRIES + (REQUIRED_EXTRA_TRIES if required else 0)):
         side = rng.choice("SNWE")
-        f, w = frames[side], round(rng.uniform(w_lo, w_hi), 2)
+        f, w = frames[side], round(rng.uniform(w_lo, w_hi), 2) if attempt < PLACE_TRIES else w_lo
         if f.length < w + 0.1:
             continue
         s = round(rng.uniform(w / 2 + 0.05, f.length - w / 2 - 0.05), 3)
