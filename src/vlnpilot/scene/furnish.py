@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from vlnpilot.scene.furniture import FURNITURE, Piece, WallFrame, centrepiece
 from vlnpilot.scene.layout import Plan, PlanRoom
 from vlnpilot.scene.model import Solid, Spawn, Target
+from vlnpilot.scene.validate import VIEW_M
 from vlnpilot.types import Pose
 
 WALL_IN = 0.05  # each room's half of a wall stands this far inside its floor polygon
@@ -22,7 +23,6 @@ CLOSED_KEEP_DEPTH = 0.6
 SHALLOW_M = 0.4  # pieces reaching flight altitude no further than this from the wall may share a door's wall
 FLIGHT_BAND = (0.9, 1.1)  # heights at which a solid is an obstacle for the drone
 PLACE_TRIES, REQUIRED_EXTRA_TRIES = 40, 120  # random placements tried per piece; more for a required one
-VIEW_M = 0.7  # the oracle's viewing distance in front of a target (pilots.oracle.OraclePilot.view_m)
 Rect = tuple[float, float, float, float]  # xmin, ymin, xmax, ymax
 
 # room kind -> pieces in placement order: (furniture kind, target id or None, required)
