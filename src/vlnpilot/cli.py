@@ -23,7 +23,7 @@ app.add_typer(scene_app, name="scene")
 console = Console(soft_wrap=True)
 err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wrapping at 80 columns)
 
-SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name.")]
+SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name: cabin or house:SEED[?rooms=N&types=a,b].")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
 
 
@@ -67,7 +67,9 @@ def scene_render(scene: SceneOpt = "cabin",
                  out: OutOpt = None,
                  width: Annotated[int, typer.Option(min=16, max=960)] = 640,
                  height: Annotated[int, typer.Option(min=16, max=720)] = 480) -> None:
-    """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan."""
+    """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan.
+
+    Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
     from PIL import Image
 
     from vlnpilot.record import check_writable
@@ -81,8 +83,13 @@ def scene_render(scene: SceneOpt = "cabin",
         obs = sim.reset(spawn_id)
         Image.fromarray(obs.front_rgb).save(out_dir / "front.png")
         Image.fromarray(obs.rear_rgb).save(out_dir / "rear.png")
+        for other in [] if spawn else sim.scene.spawns:
+            obs = sim.reset(other.id)
+            Image.fromarray(obs.front_rgb).save(out_dir / f"{other.id}-front.png")
+            Image.fromarray(obs.rear_rgb).save(out_dir / f"{other.id}-rear.png")
         save_floorplan(sim.scene, out_dir / "map.png")
-    console.print(f"wrote {out_dir}/front.png, rear.png and map.png")
+    each = "" if spawn else " (and SPAWN-front.png, SPAWN-rear.png from every spawn)"
+    console.print(f"wrote {out_dir}/front.png, rear.png{each} and map.png")
 
 
 @app.command("run")
@@ -232,7 +239,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 
 
 @app.command("bench")
-def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite YAML file.")] = "paper",
+def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1)] = None,
