@@ -40,6 +40,23 @@ def summary_table(sets: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def row_table(sets: dict[str, list[dict]]) -> str:
+    """Successes per paper-suite row and set (the rows of the paper's Table 4)."""
+    names = sorted(sets, key=lambda n: (n != "baseline", n))
+    per: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
+    for name in names:
+        for t in sets[name]:
+            per[t["row"].rsplit("-", 1)[0] if t["row"][-1].isdigit() else t["row"]][name].append(t["outcome"])
+    lines = ["| row | " + " | ".join(LABELS.get(n, n) for n in names) + " |", "|---|" + "---|" * len(names)]
+    for row in sorted(per):
+        cells = []
+        for name in names:
+            got = per[row][name]
+            cells.append(f"{got.count('success')}/{len(got)}" if got else "")
+        lines.append(f"| {row} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
 def trial_lines(sets: dict[str, list[dict]]) -> str:
     lines = ["| trials | row | outcome | steps | prompt version | flown |", "|---|---|---|---|---|---|"]
     for name in sorted(sets, key=lambda n: (n != "baseline", n)):
@@ -53,6 +70,8 @@ def main() -> None:
     root = Path(sys.argv[1] if len(sys.argv) > 1 else "trials")
     sets = load(root)
     print(summary_table(sets))
+    print()
+    print(row_table(sets))
     print()
     print(trial_lines(sets))
 

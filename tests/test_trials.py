@@ -78,3 +78,15 @@ def test_a_set_replays_through_the_bench(tmp_path: Path) -> None:
     got = {r["row"]: r["result"]["outcome"] for r in map(json.loads, (out / "results.jsonl").read_text().splitlines())}
     want = {p.name: json.loads((p / "trial.json").read_text())["outcome"] for p in set_dir.iterdir() if p.is_dir()}
     assert got == want
+
+
+def test_readme_tables_come_from_the_trials() -> None:
+    """The README's before/after tables are what scripts/trials_table.py prints from trials/*/*/trial.json."""
+    import runpy
+
+    table = runpy.run_path(str(TRIALS.parent / "scripts" / "trials_table.py"))
+    sets = table["load"](TRIALS)
+    readme = (TRIALS.parent / "README.md").read_text()
+    assert table["summary_table"](sets) in readme
+    assert table["row_table"](sets) in readme
+    assert table["trial_lines"](sets) in (TRIALS / "README.md").read_text()
