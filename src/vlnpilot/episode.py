@@ -16,7 +16,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, context_name, context_preset
@@ -27,6 +27,7 @@ from vlnpilot.overrides import override_reason
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
+from vlnpilot.pilots.keyboard import HUMAN
 from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
 from vlnpilot.record import Recorder, git_sha, package_versions
 from vlnpilot.safety import (
@@ -42,7 +43,7 @@ from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge, shortest_path_length, spl
 from vlnpilot.types import GroundTruth, Observation, Pose
 
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "aborted")
 
 
 @dataclass(frozen=True)
@@ -112,6 +113,19 @@ class EpisodeResult:
 
 
 StepCallback = Callable[[dict[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class Gate:
+    """What a loop control (the live station, vlnpilot.live) says before a step: who flies it, or stop here."""
+
+    pilot: Pilot | None = None  # flies this step instead of the episode's pilot (a person at the keyboard)
+    abort: str | None = None  # the episode ends now, outcome `aborted`, for this reason
+
+
+class LoopControl(Protocol):
+    def before_step(self, step: int) -> Gate:
+        """Called once per step before the pilot is asked; may wait (pause)."""
 
 
 def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
@@ -199,7 +213,8 @@ def _reseed(pilot: Pilot, seed: int | None) -> None:
 
 def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
-                on_step: StepCallback | None = None, pilot_spec: str | None = None) -> EpisodeResult:
+                on_step: StepCallback | None = None, pilot_spec: str | None = None,
+                control: LoopControl | None = None) -> EpisodeResult:
     """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given."""
     config = config or EpisodeConfig()
     t_start = time.perf_counter()
@@ -242,7 +257,13 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
     deadline = _Deadline(config.step_deadline_s if bounded else None, pilot)
     for step in range(1, config.max_steps + 1):
+        gate = control.before_step(step) if control is not None else Gate()
+        if gate.abort is not None:
+            outcome, reason = "aborted", gate.abort
+            break
         steps = step
+        flier = gate.pilot or pilot  # a person's decisions need no deadline: they wait for the keyboard
+        ask = deadline.ask if gate.pilot is None else (lambda p, pin, s, prof, _left: _ask(p, pin, s, prof))
         feedback: list[str] = list(notes)
         failures: list[dict[str, Any]] = []
         decision: Decision | None = None
@@ -256,7 +277,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             pin = PilotInput(image=image, query=task.query, topological_map=topo, state=state,
                              previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback),
                              context=context_lines)
-            answer = deadline.ask(pilot, pin, state, config.profile, step_end - time.monotonic())
+            answer = ask(flier, pin, state, config.profile, step_end - time.monotonic())
             calls += 1
             attempt += 1
             usage = usage + answer.usage
@@ -389,6 +410,8 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
     }
     if confirmation is not None:  # only with the confirm_final context item, so paper-context records are unchanged
         record["confirmation"] = confirmation
+    if decision is not None and decision.model == HUMAN:  # a person flew this step from the live station
+        record["human"] = True
     if recorder is not None:
         record["frames"] = recorder.save_observation(step, obs.front_rgb, obs.rear_rgb)
         recorder.step(record)
