@@ -127,6 +127,9 @@ class LoopControl(Protocol):
     def before_step(self, step: int) -> Gate:
         """Called once per step before the pilot is asked; may wait (pause)."""
 
+    def abort_reason(self) -> str | None:
+        """Why the episode must end now (an emergency stop while the pilot thought), checked before executing."""
+
 
 def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
     gt = env.ground_truth() if hasattr(env, "ground_truth") else None
@@ -302,6 +305,12 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             why = answer.hint or f"{answer.error}. Answer again with valid values."
             feedback = [*notes, f"Your previous answer was rejected: {why}"]
 
+        abort = control.abort_reason() if control is not None else None
+        if abort is not None:  # stopped while the pilot thought: its answer is recorded, never executed
+            outcome, reason = "aborted", abort
+            _record(recorder, on_step, step, state, decision, failures, None, None, obs, obs.pose, None, None, None,
+                    confirmation=confirmation)
+            break
         if fatal:
             outcome, reason = "pilot_error", failures[-1]["reason"]
             _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None,

@@ -1,8 +1,9 @@
 """Pause, emergency stop, take-over and hand back, shared by the web server's threads and the episode loop.
 
-The loop calls `before_step` once per step before it asks the pilot (episode.LoopControl); while a person
-flies, the KeyboardPilot calls `wait_for_command`. Nothing is queued: a person's command is taken only while
-the loop waits for that very step, so a message from a page that lost its connection is never replayed.
+The loop calls `before_step` once per step before it asks the pilot, and `abort_reason` before it executes the
+answer, so that an emergency stop pressed while a model thinks stops its command too (episode.LoopControl);
+while a person flies, the KeyboardPilot calls `wait_for_command`. Nothing is queued: a person's command is taken
+only while the loop waits for that very step, so a message from a page that lost its connection is never replayed.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from typing import Any
 from vlnpilot.episode import Gate
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import state_spec
-from vlnpilot.pilots.base import Decision, Pilot, PilotInput
+from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput
 from vlnpilot.pilots.keyboard import KeyboardPilot, human_decision
 
 ACTIONS = ("pause", "resume", "stop", "take_over", "hand_back", "command")
@@ -75,12 +76,16 @@ class LiveControl:
             try:
                 while self._command is None and self._human and not self._stopped:
                     self._cond.wait(_TICK_S)
-                if self._stopped:  # hover now; the next before_step ends the episode
-                    return human_decision("E", pin.state.value, "emergency stop")
+                if self._stopped:  # the loop then ends the episode without executing anything
+                    raise PilotError(STOP_REASON, fatal=True, reason="emergency_stop")
                 return self._command  # None: handed back while waiting, the model flies this step
             finally:
                 self._waiting, self._command = None, None
                 self._changed()
+
+    def abort_reason(self) -> str | None:
+        with self._cond:
+            return STOP_REASON if self._stopped else None
 
     def finish(self) -> None:
         """The episode is over: every later control message is refused."""

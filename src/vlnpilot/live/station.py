@@ -36,8 +36,7 @@ class LiveStation:
         token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
         if token is None and not is_loopback(host):
             raise ConfigError(f"the live station on {host} without a token would let anyone who reaches it fly "
-                              f"the drone; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or use "
-                              "--live-host 127.0.0.1")
+                              f"the drone; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or bind 127.0.0.1")
         self.token = token
         self._socket = _bind(host, port)
         self.port = self._socket.getsockname()[1]
@@ -83,7 +82,7 @@ def _bind(host: str, port: int) -> socket.socket:
     except (OSError, OverflowError) as exc:
         sock.close()
         raise ConfigError(f"the live station cannot listen on {host}:{port} ({getattr(exc, 'strerror', None) or exc});"
-                          " choose another port with --live-port, or another address") from None
+                          " choose another port, or another address") from None
     sock.listen(16)
     sock.set_inheritable(True)
     return sock
