@@ -23,10 +23,6 @@ def post(station: LiveStation, body: dict, token: str | None = None) -> httpx.Re
     return httpx.post(f"{station.url}api/control", json=body, headers=headers, timeout=10)
 
 
-def test_aborted_is_an_outcome() -> None:
-    assert "aborted" in OUTCOMES
-
-
 def test_control_without_the_token_gets_401_and_changes_nothing(tmp_path: Path) -> None:
     control = LiveControl(pilot=None)  # type: ignore[arg-type]  # no episode: only the messages are under test
     with LiveStation(tmp_path, control=control, port=0, token="s3cret") as station:
@@ -93,6 +89,9 @@ def test_human_steps_are_recorded_and_the_stop_aborts_within_one_step(tmp_path: 
     assert [s["executed"] for s in steps[3:]] == ["B1", "B1", None] and steps[3]["model"] == "human"
     assert steps[5]["failures"][0]["kind"] == "emergency_stop" and steps[5]["pose_after"] == steps[4]["pose_after"]
     assert ep.pilot.calls == 3
+    from vlnpilot.report.html import write_episode_report
+
+    assert "aborted" in write_episode_report(tmp_path / "run").read_text(encoding="utf-8")
 
 
 def test_watch_streams_a_finished_run_read_only(tmp_path: Path) -> None:
@@ -122,3 +121,9 @@ def test_watch_of_a_directory_without_a_run_is_one_line(tmp_path: Path, monkeypa
         cli.main()
     err = capsys.readouterr().err
     assert info.value.code == 2 and len(err.strip().splitlines()) == 1 and "summary.json" in err
+
+
+def test_reports_know_the_aborted_outcome() -> None:
+    from vlnpilot.report.plots import OUTCOME_COLORS, OUTCOME_LABELS, OUTCOME_ORDER
+
+    assert set(OUTCOMES) <= set(OUTCOME_ORDER) and set(OUTCOME_ORDER) <= set(OUTCOME_COLORS) & set(OUTCOME_LABELS)
