@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+import threading
 from pathlib import Path
 
 import httpx
@@ -127,3 +128,29 @@ def test_reports_know_the_aborted_outcome() -> None:
     from vlnpilot.report.plots import OUTCOME_COLORS, OUTCOME_LABELS, OUTCOME_ORDER
 
     assert set(OUTCOMES) <= set(OUTCOME_ORDER) and set(OUTCOME_ORDER) <= set(OUTCOME_COLORS) & set(OUTCOME_LABELS)
+
+
+def test_the_stop_releases_a_held_loop() -> None:
+    control = LiveControl(pilot=None)  # type: ignore[arg-type]
+    control.act("pause")
+    gates = []
+    loop = threading.Thread(target=lambda: gates.append(control.before_step(4)))
+    loop.start()
+    with control._cond:
+        assert control._cond.wait_for(lambda: control.status()["holding"], timeout=30)
+    assert gates == []  # held: the pilot is not asked
+    control.act("stop")
+    loop.join(30)
+    assert gates[0].abort and gates[0].pilot is None and not control.status()["holding"]
+
+
+def test_run_live_prints_the_address_and_flies(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+                                               capsys: pytest.CaptureFixture[str]) -> None:
+    monkeypatch.setattr(sys, "argv", ["vln-pilot", "run", "Go to the bathroom", "--spawn", "living_room", "--pilot",
+                                      "oracle", "--max-steps", "3", "--live", "--live-port", "0", "--no-video",
+                                      "--out", str(tmp_path / "r")])
+    with pytest.raises(SystemExit) as info:
+        cli.main()
+    out = capsys.readouterr().out
+    assert info.value.code == 0 and "live station: http://127.0.0.1:" in out
+    assert load_run(tmp_path / "r")[0]["status"] == "finished"

@@ -9,6 +9,9 @@ drone hovers (E) and the step counts an invalid decision.
 Between the validated decision and the drone sits the safety layer (`vlnpilot.safety`, `EpisodeConfig.shield`):
 an oscillation guard, a door-crossing assist and a shield may change the command (and, when the guard commits to
 a crossing, the next state); each change is recorded and told to the pilot in the next prompt's feedback.
+
+A loop control (`LoopControl`, e.g. the live ground station, vlnpilot.live) may hold the loop before a step,
+hand the step to a person (steps marked `human`) or end the episode `aborted` before anything more is executed.
 """
 
 from __future__ import annotations
