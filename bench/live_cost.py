@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import statistics
 import tempfile
 import threading
@@ -39,6 +40,12 @@ def step_times(sim: Simulator, run_dir: Path, control: LiveControl | None, pilot
     run_episode(sim, pilot, task, EpisodeConfig(max_steps=60), spawn="living_room", recorder=recorder,
                 on_step=lambda _rec: stamps.append(time.perf_counter()), control=control)
     return [b - a for a, b in zip(stamps[1:], stamps[2:], strict=False)]  # the first includes reset and start
+
+
+def thread_cpu_s(native_id: int) -> float:
+    """CPU seconds (user + system) a thread of this process has used, from /proc (Linux)."""
+    fields = open(f"/proc/self/task/{native_id}/stat").read().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 @contextlib.contextmanager
@@ -78,6 +85,7 @@ def main() -> None:
     args = parser.parse_args()
     plain: list[float] = []
     live: list[float] = []
+    server_cpu = 0.0
     with Simulator("cabin") as sim, tempfile.TemporaryDirectory() as tmp:
         pilot = OraclePilot()
         step_times(sim, Path(tmp) / "warm", None, pilot)  # warm-up: renderers, caches
@@ -87,13 +95,16 @@ def main() -> None:
             control = LiveControl(pilot)
             with LiveStation(run_dir, control=control, scene=sim.scene, port=0) as station, \
                     connected_page(station.url, args.client):
+                cpu0 = thread_cpu_s(station.native_id)
                 live += step_times(sim, run_dir, control, pilot)
                 time.sleep(0.5)  # let the page take the last step before it closes
+                server_cpu += thread_cpu_s(station.native_id) - cpu0
             control.finish()
     p, q = statistics.median(plain), statistics.median(live)
     print(f"steps: {len(plain)} without the station, {len(live)} with it and a {args.client} page connected")
     print(f"median time per step: {p * 1000:.2f} ms without, {q * 1000:.2f} ms with; extra {(q - p) * 1000:.2f} ms"
           f" (aim <= 5 ms)")
+    print(f"the station's own thread (HTTP, SSE, frames): {server_cpu / len(live) * 1000:.2f} ms CPU per step")
     print(f"machine: {describe()}")
 
 

@@ -53,6 +53,11 @@ class LiveStation:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/"
 
+    @property
+    def native_id(self) -> int | None:
+        """The serving thread's id for the OS (bench/live_cost.py reads its CPU time)."""
+        return self._thread.native_id
+
     def _serve(self) -> None:
         self._server.run(sockets=[self._socket])
 

@@ -25,6 +25,16 @@ function why(rec) {
   return out.join("; ");
 }
 
+// At most one redraw per RENDER_MS: a fast pilot (the oracle flies ~20 steps/s) would otherwise make the page
+// decode and paint every frame, taking CPU from the simulator on a small machine. Every step stays in the record.
+const RENDER_MS = 200;
+let lastRender = 0, pending = null;
+function scheduleRender() {
+  if (pending) return;
+  const wait = Math.max(0, lastRender + RENDER_MS - performance.now());
+  pending = setTimeout(() => { pending = null; lastRender = performance.now(); renderStep(); }, wait);
+}
+
 function renderStep() {
   const rec = latest();
   if (!rec) return;
@@ -157,7 +167,7 @@ async function start() {
     if (!ended) { $("conn").textContent = "disconnected"; $("conn").className = "badge off"; }
     renderStatus();
   };
-  es.addEventListener("step", (ev) => { const r = JSON.parse(ev.data); steps.set(r.step, r); renderStep(); });
+  es.addEventListener("step", (ev) => { const r = JSON.parse(ev.data); steps.set(r.step, r); scheduleRender(); });
   es.addEventListener("summary", (ev) => { summary = JSON.parse(ev.data); renderHeader(); renderPlan(); });
   es.addEventListener("status", (ev) => { status = JSON.parse(ev.data); renderStatus(); });
   es.addEventListener("end", () => {
