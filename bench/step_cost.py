@@ -37,10 +37,10 @@ def ms(seconds: float) -> float:
     return seconds * 1000.0
 
 
-def measure(steps: int, width: int, height: int) -> dict[str, list[float]]:
+def measure(steps: int, width: int, height: int, scene: str = "cabin") -> dict[str, list[float]]:
     import mujoco  # after vlnpilot.sim, which picks the headless GL backend
 
-    sim = Simulator("cabin", SimConfig(width=width, height=height, rear_width=width, rear_height=height))
+    sim = Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height))
     times: dict[str, list[float]] = {"step": [], "sweep": [], "front": [], "rear": [], "forward": []}
     try:
         for spawn in sim.scene.spawns:

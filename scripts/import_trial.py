@@ -79,7 +79,7 @@ def main() -> None:
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("set_dir", type=Path)
     parser.add_argument("row")
-    parser.add_argument("--flown-by", required=True)
+    parser.add_argument("--flown-by", required=True, help="the model, as it names itself")
     parser.add_argument("--interface", required=True, choices=["stdin", "files"])
     parser.add_argument("--scene", help="the scene's current name, if it was renamed since the trial was flown")
     parser.add_argument("--account", type=Path, help="the pilot's own account of the episode (markdown)")

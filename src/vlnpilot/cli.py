@@ -23,7 +23,7 @@ app.add_typer(scene_app, name="scene")
 console = Console(soft_wrap=True)
 err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wrapping at 80 columns)
 
-SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name.")]
+SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name: cabin or house:SEED[?rooms=N&types=a,b].")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
 
 
@@ -67,7 +67,9 @@ def scene_render(scene: SceneOpt = "cabin",
                  out: OutOpt = None,
                  width: Annotated[int, typer.Option(min=16, max=960)] = 640,
                  height: Annotated[int, typer.Option(min=16, max=720)] = 480) -> None:
-    """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan."""
+    """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan.
+
+    Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
     from PIL import Image
 
     from vlnpilot.record import check_writable
@@ -81,8 +83,13 @@ def scene_render(scene: SceneOpt = "cabin",
         obs = sim.reset(spawn_id)
         Image.fromarray(obs.front_rgb).save(out_dir / "front.png")
         Image.fromarray(obs.rear_rgb).save(out_dir / "rear.png")
+        for other in [] if spawn else sim.scene.spawns:
+            obs = sim.reset(other.id)
+            Image.fromarray(obs.front_rgb).save(out_dir / f"{other.id}-front.png")
+            Image.fromarray(obs.rear_rgb).save(out_dir / f"{other.id}-rear.png")
         save_floorplan(sim.scene, out_dir / "map.png")
-    console.print(f"wrote {out_dir}/front.png, rear.png and map.png")
+    each = "" if spawn else " (and SPAWN-front.png, SPAWN-rear.png from every spawn)"
+    console.print(f"wrote {out_dir}/front.png, rear.png{each} and map.png")
 
 
 @app.command("run")
@@ -97,26 +104,38 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
-        shield: Annotated[str, typer.Option("--shield", help="Safety shield: off, geometry or depth.")] = "geometry",
+        shield: Annotated[str | None, typer.Option(
+            "--shield", help="off, geometry, depth or assist (default: geometry; with a Tello: assist).")] = None,
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
         context: Annotated[str, typer.Option("--context", help="Pilot context: paper (the paper's five inputs) "
                                              "or plus (odometry, budget, memory, confirmation).")] = "paper",
         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a run already in --out.")] = False,
+        robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator) or tello.")] = "sim",
+        tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
+        judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
+                                           "declared outcome.")] = "ask",
         live: Annotated[bool, typer.Option("--live", help="Serve the live ground station while it flies.")] = False,
         live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
         live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
         ) -> None:
-    """Fly one episode on the embedded simulator, record it and write its report.
+    """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
     Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 2 for bad input,
     130 when interrupted."""
+    from vlnpilot.environment import check_capabilities
     from vlnpilot.episode import EpisodeConfig, run_episode
     from vlnpilot.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.record import Recorder, claim_run_dir, default_run_dir
+    from vlnpilot.robots.operator import ConsoleOperator, make_judge
+    from vlnpilot.robots.session import DEFAULT_SHIELDS, check_robot, open_robot, robot_capabilities
     from vlnpilot.scene import load_scene
-    from vlnpilot.sim import Simulator
     from vlnpilot.tasks import parse_query
+
+    robot = check_robot(robot, tello_host)
+    shield = shield or DEFAULT_SHIELDS[robot]
+    operator = ConsoleOperator()
+    judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
@@ -130,6 +149,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     options = {"base_url": check_base_url(base_url)} if base_url else {}
     _say_remote_url(pilot)
     pilot_obj = make_pilot(pilot, **options)
+    check_capabilities(robot_capabilities(robot), robot, shield=shield, pilot=pilot_obj)  # before anything flies
     run_dir = claim_run_dir(out or default_run_dir("runs", f"{spawn_id}-{query}"), overwrite=overwrite)
 
     def show(rec: dict) -> None:
@@ -145,11 +165,12 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
-    with station as control, Simulator(sc) as env, _sigterm_interrupts():
+    with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
+                                        operator=operator) as env, _sigterm_interrupts():
         recorder = Recorder(run_dir, overwrite=True)  # claimed above
         try:
             result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
-                                 pilot_spec=pilot, control=control)
+                                 pilot_spec=pilot, judge_outcome=judge_outcome, control=control)
         except KeyboardInterrupt:
             recorder.close("interrupted")
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
@@ -242,7 +263,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 
 
 @app.command("bench")
-def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite YAML file.")] = "paper",
+def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1)] = None,
@@ -277,6 +298,30 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="'paper' or a suite
 
         console.print(f"report: {escape(str(write_bench_report(bench_dir)))}")
     raise typer.Exit(exit_code_for(r["result"]["outcome"] for r in ResultsLog(bench_dir / RESULTS).read()))
+
+
+@app.command("tello-emulator")
+def tello_emulator(scene: SceneOpt = "cabin",
+                   spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
+                   host: Annotated[str, typer.Option("--host", help="A loopback address.")] = "127.0.0.1",
+                   port: Annotated[int, typer.Option("--port", min=1, max=65535)] = 8889,
+                   state_port: Annotated[int, typer.Option("--state-port", min=1, max=65535)] = 8890,
+                   video_port: Annotated[int, typer.Option("--video-port", min=1, max=65535)] = 11111,
+                   battery: Annotated[float, typer.Option("--battery", min=0, max=100, help="Start %.")] = 100.0,
+                   drop_replies: Annotated[float, typer.Option("--drop-replies", min=0, max=0.99)] = 0.0,
+                   video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
+                   ) -> None:
+    """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
+    from vlnpilot.robots.emulator import EmulatorConfig
+    from vlnpilot.robots.session import serve_emulator
+    from vlnpilot.scene import load_scene
+
+    sc = load_scene(scene)
+    if spawn is not None:
+        sc.spawn(spawn)  # validate: one line listing the spawns
+    config = EmulatorConfig(host=host, port=port, state_port=state_port, video_port=video_port, battery_pct=battery,
+                            drop_replies=drop_replies, video_delay_s=video_delay)
+    serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 
 @app.command("serve")

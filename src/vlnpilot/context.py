@@ -24,7 +24,7 @@ CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends t
                 "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "
                 "otherwise choose another state and movement.")
 _CONFIRM_WHY = {
-    State.STAY_ON_ROOM: " (the drone is inside the goal room, well past the door it came through)",
+    State.STAY_ON_ROOM: " (the drone is inside the goal room, not in or just before a doorway)",
     State.DESCRIBE_OBJECT: " (measure again how much of the image width the whole object spans: the stop rule of "
                            "Reach Object)",
 }

@@ -23,8 +23,8 @@ from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, context_name, context_preset
-from vlnpilot.environment import Environment
-from vlnpilot.errors import ConfigError
+from vlnpilot.environment import Environment, capabilities_of
+from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
 from vlnpilot.overrides import override_reason
 from vlnpilot.pilots._common import TRANSIENT_REASONS
@@ -46,7 +46,9 @@ from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge, shortest_path_length, spl
 from vlnpilot.types import GroundTruth, Observation, Pose
 
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "aborted")
+# halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move)
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "aborted")
+JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
 
 
 @dataclass(frozen=True)
@@ -106,6 +108,7 @@ class EpisodeResult:
     interventions: int = 0  # commands changed by the safety layer (guard, door assist, shield)
     oscillation_events: int = 0  # oscillation stretches the guard detected (also with the shield off)
     shield: str = "off"
+    judged_by: str = "ground_truth"  # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
 
     @property
     def success(self) -> bool:
@@ -220,8 +223,12 @@ def _reseed(pilot: Pilot, seed: int | None) -> None:
 def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
-                control: LoopControl | None = None) -> EpisodeResult:
-    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given."""
+                judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
+    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given.
+
+    Without ground truth (a real robot) a declared final state is a success only as declared, unless
+    `judge_outcome` (the operator) confirms or rejects it.
+    """
     config = config or EpisodeConfig()
     t_start = time.perf_counter()
     obs: Observation = env.reset(spawn, seed=config.seed)
@@ -241,6 +248,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     calls = invalid = failed_streak = 0
     state, previous = State.RECOGNIZE_ROOM, None  # Start: the controller takes off, then Recognize Room
     outcome, reason, contact = "max_steps", f"no final state within {config.max_steps} steps", None
+    judged_by = "ground_truth" if gt is not None else "none"
 
     if recorder is not None:
         frames = recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
@@ -252,6 +260,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
+            "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
                            "scene_fingerprint": scene.fingerprint(),
                            "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
@@ -330,7 +339,12 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             command, next_state = get_command(decision.movement), parse_state(decision.state)
         verdict = safety.filter(step, state, command, next_state, pose_before)
         command, next_state, notes = verdict.command, verdict.next_state, verdict.feedback
-        obs = env.step(command)
+        halt: RobotHalt | None = None
+        try:
+            obs = env.step(command)
+        except RobotHalt as exc:  # a real robot's safety rule (battery, geofence, lost reply) ends the episode
+            halt = exc
+            obs = exc.observation if isinstance(exc.observation, Observation) else obs
         safety.observe(obs)
         path.update(pose_before, obs.pose)
         reversal = osc.update(command)
@@ -342,6 +356,9 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         pilot_context.update(step, state, decision, command, next_state)
         previous = command.code
 
+        if halt is not None:
+            outcome, reason = "halted", str(halt)
+            break
         if obs.collided:
             outcome, reason, contact = "collision", f"touched {obs.contact}", obs.contact
             break
@@ -350,8 +367,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             break
         state = next_state
         if state in FINAL_STATES:
-            if gt is None:
-                outcome, reason = "success", "final state declared (no ground truth to judge it)"
+            if gt is None and judge_outcome is not None:
+                ok, reason = judge_outcome(task, state)
+                outcome, judged_by = ("success" if ok else "false_success"), "operator"
+            elif gt is None:
+                outcome, reason, judged_by = "success", "final state declared (no ground truth to judge it)", "declared"
             else:
                 ok, why = judge(task, state, gt, config.success)
                 outcome, reason = ("success" if ok else "false_success"), why
@@ -367,7 +387,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         input_tokens=usage.input_tokens, cached_tokens=usage.cached_tokens, output_tokens=usage.output_tokens,
         cost_usd=round(usage.cost_usd, 6), latency_s_total=round(usage.latency_s, 4), pilot_calls=calls,
         wall_time_s=round(time.perf_counter() - t_start, 3), interventions=len(safety.interventions),
-        oscillation_events=len(safety.events), shield=safety.name,
+        oscillation_events=len(safety.events), shield=safety.name, judged_by=judged_by,
     )
     if recorder is not None:
         recorder.finish({"result": result.to_dict(), "end_pose": obs.pose.as_dict(),
@@ -424,6 +444,8 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
         record["confirmation"] = confirmation
     if decision is not None and decision.model == HUMAN:  # a person flew this step from the live station
         record["human"] = True
+    if obs.info:  # a real robot's facts: frame age, battery, safety events
+        record["robot"] = obs.info
     if recorder is not None:
         record["frames"] = recorder.save_observation(step, obs.front_rgb, obs.rear_rgb)
         recorder.step(record)

@@ -26,3 +26,14 @@ class ConfigError(VLNPilotError, ValueError):
 
 class RenderBackendError(VLNPilotError, RuntimeError):
     """The headless OpenGL backend cannot start; the message names the library and the install command."""
+
+
+class RobotHalt(VLNPilotError):
+    """A real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move).
+
+    Carries the last observation and whether the drone has landed or still hovers, waiting for the operator.
+    """
+
+    def __init__(self, reason: str, observation: object = None, *, landed: bool = True):
+        super().__init__(reason)
+        self.observation, self.landed = observation, landed

@@ -68,7 +68,7 @@ from vlnpilot.fsm import State
 from vlnpilot.scene.model import Door, Scene
 from vlnpilot.types import Motion, Observation, Pose, wrap_deg
 
-SHIELDS = ("off", "geometry", "depth")
+SHIELDS = ("off", "geometry", "depth", "assist")  # assist: door assist and oscillation guard, no shield (a Tello)
 DEFAULT_SHIELD = "geometry"  # the CLI's default in the simulator; the library default stays "off" (paper behaviour)
 OVERLAYS = ("corridor",)
 
@@ -353,7 +353,7 @@ def make_shield(name: str, env: Any, config: SafetyConfig | None = None) -> Shie
     """
     config = config or SafetyConfig()
     key = str(name).strip().lower()
-    if key == "off":
+    if key in ("off", "assist"):
         return None
     if key == "geometry":
         gt = env.ground_truth() if hasattr(env, "ground_truth") else None
@@ -555,7 +555,9 @@ class SafetyLayer:
 
     @property
     def name(self) -> str:
-        return self.shield.name if (self.active and self.shield is not None) else "off"
+        if not self.active:
+            return "off"
+        return self.shield.name if self.shield is not None else "assist"
 
     def reset(self, obs: Observation) -> None:
         self.guard.reset()
@@ -642,7 +644,8 @@ def make_safety(shield: str, env: Any, scene: Scene, config: SafetyConfig | None
     """The controller's safety layer for a shield name; 'off' gives a passive layer (oscillation detection only)."""
     config = config or SafetyConfig()
     s = make_shield(shield, env, config)
-    return SafetyLayer(scene, config, s, active=s is not None)
+    assist = str(shield).strip().lower() == "assist"  # the parts that need only the map and the pose
+    return SafetyLayer(scene, config, s, active=s is not None or assist)
 
 
 # -- visual aid for the model -------------------------------------------------------------------------------------

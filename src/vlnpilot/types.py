@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -84,10 +84,11 @@ class Observation:
     front_rgb: np.ndarray = field(repr=False)
     rear_rgb: np.ndarray = field(repr=False)
     pose: Pose
-    collided: bool = False
+    collided: bool | None = False  # None: unknown, the robot senses no contact (the Tello)
     contact: str | None = None  # what the drone touched, e.g. 'door_living_bedroom_frame_left'
     step: int = 0
     contact_part: str | None = None  # which part of the drone touched it, e.g. 'prop_front_left'
+    info: dict[str, Any] = field(default_factory=dict, compare=False)  # robot facts to record (frame age, battery)
 
 
 @runtime_checkable

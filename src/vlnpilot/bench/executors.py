@@ -79,7 +79,8 @@ class Event:
 class SimulatorCache:
     """One Simulator per (thread, scene, settings), built on first use and reused for every later episode."""
 
-    def __init__(self) -> None:
+    def __init__(self, per_thread: int = 4) -> None:
+        self.per_thread = per_thread  # simulators kept per thread (each holds a model and GL renderers)
         self._local = threading.local()
         self._all: list[Any] = []
         self._lock = threading.Lock()
@@ -92,10 +93,20 @@ class SimulatorCache:
             sims = self._local.sims = {}
         key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg))
         if key not in sims:
+            if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
+                self._close(sims.pop(next(iter(sims))))
             sims[key] = Simulator(scene, key[1])
             with self._lock:
                 self._all.append(sims[key])
+        sims[key] = sims.pop(key)  # most recently used last
         return sims[key]
+
+    def _close(self, sim: Any) -> None:
+        with contextlib.suppress(Exception):
+            sim.close()
+        with self._lock:
+            if sim in self._all:
+                self._all.remove(sim)
 
     def close_thread(self) -> None:
         """Close this thread's simulators (their GL contexts must be released by the thread that owns them)."""

@@ -194,8 +194,8 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                 rel = Path("runs") / p.dir / row.id / str(rep)
                 specs.append(EpisodeSpec(
                     key=episode_key(p.spec, row.id, rep), pilot=p.spec, row=row.id, rep=rep,
-                    seed=episode_seed(suite.seed, row.id, rep), scene=suite.scene, spawn=row.spawn, query=row.query,
-                    goal_room=row.goal_room, goal_target=row.goal_target, max_steps=suite.max_steps,
+                    seed=episode_seed(suite.seed, row.id, rep), scene=row.scene or suite.scene, spawn=row.spawn,
+                    query=row.query, goal_room=row.goal_room, goal_target=row.goal_target, max_steps=suite.max_steps,
                     profile=suite.profile, run_dir=str((out / rel).resolve()), run_dir_rel=rel.as_posix(),
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
                     render=settings.render, save_frames=settings.save_frames,

@@ -27,14 +27,16 @@ from typing import Any
 
 import yaml
 
+from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
 from vlnpilot.errors import ConfigError, VLNPilotError
 from vlnpilot.fsm import PROFILES
 from vlnpilot.scene import SCENES, Scene, load_scene
+from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
 from vlnpilot.tasks import Task, parse_query
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
              "spawn_labels", "rows")
-_ROW_KEYS = ("id", "spawn", "query", "goal")
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene")  # a row's own scene overrides the suite's (house suites)
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -55,14 +57,16 @@ class SuiteRow:
     query: str
     goal_room: str
     goal_target: str | None = None
+    scene: str | None = None  # this row's scene when it differs from the suite's (e.g. 'house:7')
 
     @property
     def task(self) -> Task:
         return Task(query=self.query, goal_room=self.goal_room, goal_target=self.goal_target)
 
     def canonical(self) -> dict[str, Any]:
-        return {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
-                "goal_target": self.goal_target}
+        out = {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
+               "goal_target": self.goal_target}
+        return {**out, "scene": self.scene} if self.scene else out
 
 
 @dataclass(frozen=True)
@@ -91,6 +95,8 @@ class Suite:
         if spawn in self.spawn_labels:
             return self.spawn_labels[spawn]
         scene = load_scene(self.scene)
+        if spawn not in {s.id for s in scene.spawns}:  # a spawn of another row's own scene (house suites)
+            return spawn.replace("_", " ").title()
         room = scene.spawn(spawn).room
         return scene.room(room).name.title()
 
@@ -106,7 +112,8 @@ class Suite:
                 "profile": self.profile, "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
                 "spawn_labels": dict(self.spawn_labels),
                 "rows": [{"id": r.id, "spawn": r.spawn, "query": r.query,
-                          "goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}}
+                          "goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})},
+                          **({"scene": r.scene} if r.scene else {})}
                          for r in self.rows]}
 
     def dump(self) -> str:
@@ -123,7 +130,10 @@ def episode_seed(base: int, row_id: str, rep: int) -> int:
 
 
 def load_suite(suite: str | Path) -> Suite:
-    """A built-in suite by name (`paper`) or a YAML file; refused with every problem listed if it is invalid."""
+    """A built-in suite by name (`paper`, `houses`, `houses:SEEDS`) or a YAML file; refused with every problem
+    listed if it is invalid."""
+    if isinstance(suite, str) and is_house_suite(suite):
+        return suite_from_dict(house_suite_dict(suite), source=f"builtin:{suite.strip()}", default_name="houses")
     text, source, default_name = _read(suite)
     try:
         data = yaml.safe_load(text)
@@ -167,9 +177,13 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     if unknown:
         errors.append(f"unknown key(s) {', '.join(map(repr, unknown))}; valid keys: {', '.join(_TOP_KEYS)}")
     scene_name = str(data.get("scene", "cabin"))
-    if scene_name.strip().lower() not in SCENES:
-        raise SuiteError(f"suite {source}: unknown scene {scene_name!r}; valid scenes: {', '.join(sorted(SCENES))}")
-    scene = load_scene(scene_name)
+    if scene_name.strip().lower() not in SCENES and not scene_name.strip().lower().startswith(HOUSE_PREFIX):
+        raise SuiteError(f"suite {source}: unknown scene {scene_name!r}; valid scenes: {', '.join(sorted(SCENES))}, "
+                         "house:SEED")
+    try:
+        scene = load_scene(scene_name)
+    except VLNPilotError as exc:
+        raise SuiteError(f"suite {source}: {exc}") from None
     reps = _int(data.get("repetitions", 5), "repetitions", errors, 1)
     max_steps = _int(data.get("max_steps", 50), "max_steps", errors, 1)
     seed = _int(data.get("seed", 0), "seed", errors)
@@ -228,6 +242,13 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
         errors.append(f"{where}: unknown key(s) {', '.join(map(repr, unknown))}; valid keys: {', '.join(_ROW_KEYS)}")
     spawn, query = raw.get("spawn"), raw.get("query")
     before = len(errors)
+    row_scene = raw.get("scene")
+    if row_scene is not None:
+        try:
+            scene = load_scene(str(row_scene))
+        except VLNPilotError as exc:
+            errors.append(f"{where}: {exc}")
+            return None
     valid_spawns = [s.id for s in scene.spawns]
     if spawn not in valid_spawns:
         errors.append(f"{where}: unknown spawn {spawn!r}; valid spawns: {', '.join(valid_spawns)}")
@@ -266,7 +287,8 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
         errors.append(f"{where}: id {row_id!r} must be letters, digits, '.', '_' or '-' (it names a directory)")
     if len(errors) > before:
         return None
-    return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target)
+    return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target,
+                    scene=scene.name if row_scene is not None else None)
 
 
 def _slug(text: str) -> str:

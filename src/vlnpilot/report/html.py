@@ -365,6 +365,9 @@ def _episode_header(ep: Episode, colors: Mapping[str, str]) -> str:
 
 def _frame(ep: Episode, entry: Entry, view: str, caption: str) -> str:
     rel = entry.frames.get(view)
+    if not rel and view == "rear" and (ep.summary.get("capabilities") or {}).get("rear_view") is False:
+        return (f'<figure><div class="noframe">this robot has no rear camera</div>'  # a real Tello
+                f'<figcaption>{caption}</figcaption></figure>')
     if not rel:
         return (f'<figure><div class="noframe">no {esc(view)} frame recorded</div>'
                 f'<figcaption>{caption}</figcaption></figure>')

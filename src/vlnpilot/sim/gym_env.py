@@ -21,6 +21,7 @@ from vlnpilot.sim.simulator import SimConfig, Simulator
 from vlnpilot.types import Observation, Pose
 
 ENV_ID = "VLNPilot/Cabin-v0"
+HOUSE_ENV_ID = "VLNPilot/House-v0"
 GOAL_REWARD, COLLISION_REWARD, STEP_REWARD = 1.0, -1.0, -0.01
 
 
@@ -153,9 +154,11 @@ class CabinEnv(gym.Env):
 
 
 def register() -> None:
-    """Register `VLNPilot/Cabin-v0` with Gymnasium (idempotent)."""
+    """Register `VLNPilot/Cabin-v0` and `VLNPilot/House-v0` (procedural houses) with Gymnasium (idempotent)."""
     if ENV_ID not in gym.registry:
         gym.register(id=ENV_ID, entry_point="vlnpilot.sim.gym_env:CabinEnv", kwargs={"scene": "cabin"})
+    if HOUSE_ENV_ID not in gym.registry:
+        gym.register(id=HOUSE_ENV_ID, entry_point="vlnpilot.sim.house_env:HouseEnv")
 
 
 register()

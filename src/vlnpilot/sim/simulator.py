@@ -14,6 +14,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from vlnpilot.commands import Command, get_command  # noqa: E402
+from vlnpilot.environment import Capabilities  # noqa: E402
 from vlnpilot.errors import ConfigError, UnknownNameError  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
@@ -60,6 +61,8 @@ def yaw_quat(yaw_deg: float) -> np.ndarray:
 
 class Simulator:
     """Implements the Environment contract: `reset(spawn, seed)`, `step(command)`, `scene`."""
+
+    capabilities = Capabilities()  # ground truth, depth, rear view and contact sensing: all of them
 
     def __init__(self, scene: str | Scene = "cabin", config: SimConfig | None = None):
         self.scene: Scene = load_scene(scene)
