@@ -6,13 +6,14 @@ knows exactly where the loop is without sleeping. `LiveEpisode` runs the episode
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
 from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
-from vlnpilot.live.control import LiveControl
+from vlnpilot.live.control import LiveControl, Refused
 from vlnpilot.live.station import LiveStation
 from vlnpilot.pilots.base import PilotError
 from vlnpilot.pilots.oracle import OraclePilot
@@ -92,7 +93,8 @@ class LiveEpisode:
 
     def close(self) -> EpisodeResult | None:
         if self.thread.is_alive():
-            self.control.act("stop") if not self.control.status()["finished"] else None
+            with contextlib.suppress(Refused):  # the episode may have ended meanwhile
+                self.control.act("stop")
             self.pilot.release(3)
             self.thread.join(30)
         self.station.close()
