@@ -114,6 +114,9 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
         judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
                                            "declared outcome.")] = "ask",
+        live: Annotated[bool, typer.Option("--live", help="Serve the live ground station while it flies.")] = False,
+        live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
+        live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
@@ -161,12 +164,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
-    with open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
-                    operator=operator) as env, _sigterm_interrupts():
+    station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
+    with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
+                                        operator=operator) as env, _sigterm_interrupts():
         recorder = Recorder(run_dir, overwrite=True)  # claimed above
         try:
             result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
-                                 pilot_spec=pilot, judge_outcome=judge_outcome)
+                                 pilot_spec=pilot, judge_outcome=judge_outcome, control=control)
         except KeyboardInterrupt:
             recorder.close("interrupted")
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
@@ -180,6 +184,26 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     report = _write_episode_report(run_dir, video=video)
     console.print(f"run directory: {escape(str(run_dir))}  (report: {escape(str(report))})")
     raise typer.Exit(exit_code_for([result.outcome]))
+
+
+def _live_station(live: bool, run_dir: Path, pilot: object, scene: object, host: str, port: int):
+    """The live ground station's control for `run --live` (vlnpilot.live), else no control."""
+    if not live:
+        return contextlib.nullcontext(None)
+    from vlnpilot.live.station import live_control
+
+    return live_control(run_dir, pilot, scene, host=host, port=port, say=lambda line: console.print(escape(line)))
+
+
+@app.command("watch")
+def watch(run_dir: Annotated[Path, typer.Argument(help="A run directory, finished or still running.")],
+          port: Annotated[int, typer.Option("--port", min=0, max=65535)] = 8765,
+          host: Annotated[str, typer.Option("--host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
+          ) -> None:
+    """Open a run in the live ground station's page, read-only, from its files (until Ctrl-C)."""
+    from vlnpilot.live.station import watch_run
+
+    watch_run(run_dir, host=host, port=port, say=lambda line: console.print(escape(line)))
 
 
 def _say_remote_url(spec: str) -> None:

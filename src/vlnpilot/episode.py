@@ -9,6 +9,9 @@ drone hovers (E) and the step counts an invalid decision.
 Between the validated decision and the drone sits the safety layer (`vlnpilot.safety`, `EpisodeConfig.shield`):
 an oscillation guard, a door-crossing assist and a shield may change the command (and, when the guard commits to
 a crossing, the next state); each change is recorded and told to the pilot in the next prompt's feedback.
+
+A loop control (`LoopControl`, e.g. the live ground station, vlnpilot.live) may hold the loop before a step,
+hand the step to a person (steps marked `human`) or end the episode `aborted` before anything more is executed.
 """
 
 from __future__ import annotations
@@ -16,7 +19,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, context_name, context_preset
@@ -27,6 +30,7 @@ from vlnpilot.overrides import override_reason
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
+from vlnpilot.pilots.keyboard import HUMAN
 from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
 from vlnpilot.record import Recorder, git_sha, package_versions
 from vlnpilot.safety import (
@@ -43,7 +47,7 @@ from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge,
 from vlnpilot.types import GroundTruth, Observation, Pose
 
 # halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move)
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted")
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "aborted")
 JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
 
 
@@ -115,6 +119,22 @@ class EpisodeResult:
 
 
 StepCallback = Callable[[dict[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class Gate:
+    """What a loop control (the live station, vlnpilot.live) says before a step: who flies it, or stop here."""
+
+    pilot: Pilot | None = None  # flies this step instead of the episode's pilot (a person at the keyboard)
+    abort: str | None = None  # the episode ends now, outcome `aborted`, for this reason
+
+
+class LoopControl(Protocol):
+    def before_step(self, step: int) -> Gate:
+        """Called once per step before the pilot is asked; may wait (pause)."""
+
+    def abort_reason(self) -> str | None:
+        """Why the episode must end now (an emergency stop while the pilot thought), checked before executing."""
 
 
 def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
@@ -203,7 +223,7 @@ def _reseed(pilot: Pilot, seed: int | None) -> None:
 def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
-                judge_outcome: JudgeOutcome | None = None) -> EpisodeResult:
+                judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
     """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given.
 
     Without ground truth (a real robot) a declared final state is a success only as declared, unless
@@ -252,7 +272,13 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
     deadline = _Deadline(config.step_deadline_s if bounded else None, pilot)
     for step in range(1, config.max_steps + 1):
+        gate = control.before_step(step) if control is not None else Gate()
+        if gate.abort is not None:
+            outcome, reason = "aborted", gate.abort
+            break
         steps = step
+        flier = gate.pilot or pilot  # a person's decisions need no deadline: they wait for the keyboard
+        ask = deadline.ask if gate.pilot is None else (lambda p, pin, s, prof, _left: _ask(p, pin, s, prof))
         feedback: list[str] = list(notes)
         failures: list[dict[str, Any]] = []
         decision: Decision | None = None
@@ -266,7 +292,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             pin = PilotInput(image=image, query=task.query, topological_map=topo, state=state,
                              previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback),
                              context=context_lines)
-            answer = deadline.ask(pilot, pin, state, config.profile, step_end - time.monotonic())
+            answer = ask(flier, pin, state, config.profile, step_end - time.monotonic())
             calls += 1
             attempt += 1
             usage = usage + answer.usage
@@ -291,6 +317,12 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             why = answer.hint or f"{answer.error}. Answer again with valid values."
             feedback = [*notes, f"Your previous answer was rejected: {why}"]
 
+        abort = control.abort_reason() if control is not None else None
+        if abort is not None:  # stopped while the pilot thought: its answer is recorded, never executed
+            outcome, reason = "aborted", abort
+            _record(recorder, on_step, step, state, decision, failures, None, None, obs, obs.pose, None, None, None,
+                    confirmation=confirmation)
+            break
         if fatal:
             outcome, reason = "pilot_error", failures[-1]["reason"]
             _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None,
@@ -410,6 +442,8 @@ def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, 
     }
     if confirmation is not None:  # only with the confirm_final context item, so paper-context records are unchanged
         record["confirmation"] = confirmation
+    if decision is not None and decision.model == HUMAN:  # a person flew this step from the live station
+        record["human"] = True
     if obs.info:  # a real robot's facts: frame age, battery, safety events
         record["robot"] = obs.info
     if recorder is not None:

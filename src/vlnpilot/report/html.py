@@ -119,7 +119,7 @@ margin:0 0 20px;box-shadow:0 1px 2px rgba(20,30,50,.04)}
 vertical-align:middle;background:var(--muted)}
 .outcome.success{background:var(--ok)}.outcome.false_success{background:var(--warn)}
 .outcome.collision{background:var(--bad)}.outcome.max_steps{background:var(--info)}
-.outcome.pilot_error{background:var(--err)}
+.outcome.pilot_error{background:var(--err)}.outcome.aborted{background:#555}
 .reason{color:var(--muted);margin-left:8px}
 .facts{display:grid;grid-template-columns:repeat(auto-fill,minmax(170px,1fr));gap:10px 18px;margin:16px 0 0}
 .facts div{border-left:3px solid var(--line);padding-left:10px}

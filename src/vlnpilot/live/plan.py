@@ -1,0 +1,37 @@
+"""The floor plan for the live page: the report's plan without legend or title, filling the whole image, so
+that the page can place the trajectory with the plan's world bounds (x to the right, y up)."""
+
+from __future__ import annotations
+
+import io
+
+from matplotlib.colors import to_hex
+from matplotlib.figure import Figure
+
+from vlnpilot.report.floorplan import STATE_COLORS, draw_floorplan
+from vlnpilot.scene.model import Scene
+
+WIDTH_IN, DPI = 6.0, 100
+
+
+def plan_png(scene: Scene) -> tuple[bytes, dict[str, float]]:
+    """The plan as PNG bytes and its bounds {xmin, xmax, ymin, ymax} in metres."""
+    (x0, y0), (x1, y1) = scene.bounds
+    height = WIDTH_IN * (y1 - y0 + 0.6) / (x1 - x0 + 0.6)
+    fig = Figure(figsize=(WIDTH_IN, height), dpi=DPI)
+    ax = fig.add_axes((0, 0, 1, 1))
+    draw_floorplan(scene, ax)
+    ax.get_legend().remove()
+    ax.set_title("")
+    ax.set_axis_off()
+    ax.set_aspect("auto")  # the figure already has the plan's proportions; the axes must fill it exactly
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=DPI)
+    (xmin, xmax), (ymin, ymax) = ax.get_xlim(), ax.get_ylim()
+    return buf.getvalue(), {"xmin": xmin, "xmax": xmax, "ymin": ymin, "ymax": ymax}
+
+
+def state_colors() -> dict[str, str]:
+    """The report's colour of each FSM state, as CSS colours."""
+    return {state: to_hex(color) for state, color in STATE_COLORS.items()}
+

@@ -1,0 +1,120 @@
+"""Serve the live app: in a background thread beside a flying episode (`run --live`), or until Ctrl-C (`watch`).
+
+The socket is bound here, before uvicorn starts, so that a port in use or a bad address is one clear error.
+Off loopback a token is required (env VLN_LIVE_TOKEN); control messages then need it too.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+import threading
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import uvicorn
+
+from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.live.app import create_live_app
+from vlnpilot.live.control import LiveControl
+from vlnpilot.pilots.base import Pilot
+from vlnpilot.record import load_run
+from vlnpilot.scene import load_scene
+from vlnpilot.server.app import is_loopback
+
+TOKEN_ENV = "VLN_LIVE_TOKEN"
+DEFAULT_PORT = 8765
+
+
+class LiveStation:
+    """The live app on `host:port` (port 0: any free port), served from a daemon thread until `close()`."""
+
+    def __init__(self, run_dir: Path, *, control: LiveControl | None = None, scene: Any | None = None,
+                 host: str = "127.0.0.1", port: int = DEFAULT_PORT, token: str | None = None):
+        token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
+        if token is None and not is_loopback(host):
+            raise ConfigError(f"the live station on {host} without a token would let anyone who reaches it fly "
+                              f"the drone; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or bind 127.0.0.1")
+        self.token = token
+        self._socket = _bind(host, port)
+        self.port = self._socket.getsockname()[1]
+        self.host = host
+        app = create_live_app(run_dir, control=control, token=token, scene=scene)
+        config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=2)
+        self._server = uvicorn.Server(config)
+        self._started = threading.Event()
+        self._thread = threading.Thread(target=self._serve, name="live-station", daemon=True)
+        self._thread.start()
+
+    @property
+    def url(self) -> str:
+        host = f"[{self.host}]" if ":" in self.host else self.host
+        return f"http://{host}:{self.port}/"
+
+    @property
+    def native_id(self) -> int | None:
+        """The serving thread's id for the OS (bench/live_cost.py reads its CPU time)."""
+        return self._thread.native_id
+
+    def _serve(self) -> None:
+        self._server.run(sockets=[self._socket])
+
+    def wait(self) -> None:
+        """Serve until Ctrl-C (the thread is a daemon: it never holds up the process's exit)."""
+        while self._thread.is_alive():
+            self._thread.join(0.5)
+
+    def close(self) -> None:
+        self._server.should_exit = True
+        self._thread.join(5)
+        self._socket.close()
+
+    def __enter__(self) -> LiveStation:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        sock.bind((host, port))
+    except (OSError, OverflowError) as exc:
+        sock.close()
+        raise ConfigError(f"the live station cannot listen on {host}:{port} ({getattr(exc, 'strerror', None) or exc});"
+                          " choose another port, or another address") from None
+    sock.listen(16)
+    sock.set_inheritable(True)
+    return sock
+
+
+@contextlib.contextmanager
+def live_control(run_dir: Path, pilot: Pilot, scene: Any, *, host: str, port: int,
+                 say: Callable[[str], None] = print) -> Iterator[LiveControl]:
+    """`run --live`: the station beside the episode; yields the control to give run_episode."""
+    control = LiveControl(pilot)
+    with LiveStation(run_dir, control=control, scene=scene, host=host, port=port) as station:
+        say(f"live station: {station.url}" + ("  (control needs #token=<VLN_LIVE_TOKEN> after the address)"
+                                              if station.token else ""))
+        try:
+            yield control
+        finally:
+            control.finish()
+
+
+def watch_run(run_dir: Path, *, host: str, port: int, say: Callable[[str], None] = print) -> None:
+    """`watch`: serve a finished or running run read-only from its files until Ctrl-C."""
+    summary, _ = load_run(run_dir)  # a ConfigError when it is not a run directory
+    try:
+        scene = load_scene(summary.get("scene") or "")
+    except VLNPilotError:  # a scene this machine does not know (a real room): the page shows no plan
+        scene = None
+    with LiveStation(run_dir, scene=scene, host=host, port=port) as station:
+        say(f"watching {run_dir}: {station.url}  (read-only; Ctrl-C to stop)")
+        with contextlib.suppress(KeyboardInterrupt):
+            station.wait()

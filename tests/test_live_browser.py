@@ -1,0 +1,142 @@
+"""Acceptance of the live ground station (issue 15) in headless Chromium (Debian's, driven by Playwright).
+
+A real simulator episode is flown by a gated oracle (tests/live_episode.py): the loop only moves when the test
+releases the pilot, so every check knows where the loop is. Covers: step N's image and decision on the page
+within 1 s of the step ending; pause holding the loop; three keyboard commands recorded `human`; hand back; a
+page closed and reopened mid-episode; the emergency stop (space) ending the episode `aborted` within one step.
+Saves a screenshot to test-artifacts/live.png (and docs/img/live.png when VLN_UPDATE_SCREENSHOTS=1).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from pathlib import Path
+
+import pytest
+
+from live_episode import LiveEpisode
+from vlnpilot.live.app import KEYS
+from vlnpilot.record import load_run
+
+CHROMIUM = Path("/usr/bin/chromium")
+ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+        "--disable-component-update", "--disable-sync", "--no-first-run"]
+ROOT = Path(__file__).resolve().parents[1]
+KEY_FOR = {code: key for key, code in reversed(KEYS.items())}  # the arrow or letter key of each command
+PREFERRED = ("B1", "C1", "A1", "D1", "D2")  # rotations first: a person turning in place never hits a wall
+
+pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"Debian's chromium is not installed at {CHROMIUM} "
+                                                             "(apt-get install chromium)")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        yield b
+        b.close()
+
+
+def open_page(browser, url: str):  # noqa: ANN001, ANN201
+    page = browser.new_page(viewport={"width": 1400, "height": 1000})
+    errors: list[str] = []
+    page.on("pageerror", lambda e: errors.append(str(e)))
+    page.goto(url, wait_until="load")
+    page.wait_for_function("() => document.getElementById('conn').textContent === 'live'", timeout=10_000)
+    return page, errors
+
+
+def shows_step(page, ep: LiveEpisode, n: int, within_s: float) -> None:  # noqa: ANN001
+    """The page shows step n's front image and decision, `within_s` after the step ended."""
+    record = ep.records[n - 1]
+    left_ms = (within_s - (time.monotonic() - ep.ended_at[n])) * 1000
+    page.wait_for_function(
+        "([n, move]) => document.getElementById('front').dataset.step === String(n)"
+        " && document.getElementById('front').complete && document.getElementById('front').naturalWidth > 0"
+        " && document.getElementById('decision').textContent.includes(move)",
+        arg=[n, (record["decision"] or {}).get("movement", "")], timeout=max(left_ms, 1))
+
+
+def test_live_station_in_chromium(browser, tmp_path: Path) -> None:  # noqa: ANN001
+    ep = LiveEpisode(tmp_path / "run")
+    try:
+        page, errors = open_page(browser, ep.station.url)
+        # step N's image and decision within 1 s of the step ending
+        for n in (1, 2):
+            ep.pilot.release(1)
+            ep.wait_steps(n)
+            shows_step(page, ep, n, within_s=1.0)
+
+        # pause holds the loop: it takes effect before the next pilot call
+        page.keyboard.press("p")
+        ep.pilot.release(1)  # step 3 was already asked for when the pause came
+        ep.wait_status(lambda s: s["holding"])
+        page.wait_for_function("() => document.getElementById('mode').textContent === 'paused (holding)'")
+        ep.pilot.release(2)  # the pilot could answer twice, but the loop is held before asking it
+        ep.wait_status(lambda s: s["holding"] and s["step"] == 4)
+        assert ep.pilot.calls == 3 and len(ep.records) == 3
+        page.keyboard.press("p")  # resume: the two released answers fly steps 4 and 5
+        ep.wait_steps(5)
+        shows_step(page, ep, 5, within_s=1.0)
+
+        # take over: three keyboard commands, recorded `human`
+        page.keyboard.press("t")
+        ep.pilot.release(1)  # step 6 is the pilot's (it was being asked); step 7 waits for the person
+        for n in (7, 8, 9):
+            waiting = ep.wait_status(lambda s, n=n: (s["waiting"] or {}).get("step") == n)["waiting"]
+            page.wait_for_function("n => document.getElementById('hstep').textContent === String(n)", arg=n)
+            if n == 8:
+                page.screenshot(path=str(screenshot_path()), full_page=True)
+            move = next(m for m in PREFERRED if m in waiting["moves"])
+            page.keyboard.press(KEY_FOR[move])
+            ep.wait_steps(n)
+            shows_step(page, ep, n, within_s=1.0)
+        _, steps = load_run(tmp_path / "run")
+        assert [s.get("human", False) for s in steps[6:9]] == [True, True, True]
+        assert not any(s.get("human") for s in steps[:6]) and all(s["executed"] for s in steps[6:9])
+
+        # hand back: the pilot flies again, from the state the person left
+        page.keyboard.press("t")
+        ep.pilot.release(1)
+        ep.wait_steps(10)
+        assert "human" not in ep.records[9] and ep.records[9]["model"] == "ground-truth"
+        assert ep.records[9]["state"] == ep.records[8]["next_state"]
+
+        # reconnect: close the page, let a step fly, reopen: the current state shows, the run is unaffected
+        page.close()
+        ep.pilot.release(1)
+        ep.wait_steps(11)
+        page, errors2 = open_page(browser, ep.station.url)
+        shows_step(page, ep, 11, within_s=5.0)
+        assert page.locator("#stepcount").text_content() == "step 11 / 40"
+        assert page.locator("#traj circle").count() == 11
+        errors += errors2
+
+        # emergency stop (space) while the pilot thinks: its answer never flies, the episode ends `aborted`
+        page.keyboard.press(" ")
+        ep.wait_status(lambda s: s["stopped"])
+        ep.pilot.release(1)
+        ep.thread.join(30)
+        page.wait_for_function("() => document.getElementById('outcome').textContent.startsWith('aborted')")
+        assert ep.result is not None and ep.result.outcome == "aborted" and ep.result.steps == 12
+        summary, steps = load_run(tmp_path / "run")
+        assert len(steps) == 12 and steps[-1]["executed"] is None and summary["result"]["outcome"] == "aborted"
+        assert [s["step"] for s in steps] == list(range(1, 13))  # nothing lost or mixed by the pages
+        assert errors == []
+    finally:
+        ep.close()
+
+
+def screenshot_path() -> Path:
+    (ROOT / "test-artifacts").mkdir(exist_ok=True)
+    return ROOT / "test-artifacts" / "live.png"
+
+
+def teardown_module() -> None:
+    shot = screenshot_path()
+    if os.environ.get("VLN_UPDATE_SCREENSHOTS") == "1" and shot.is_file():
+        shutil.copy(shot, ROOT / "docs" / "img" / "live.png")
