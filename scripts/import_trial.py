@@ -53,21 +53,25 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
 def write_suite(set_dir: Path) -> Path:
     """One suite row per trial of the set (one repetition each), with the set's common settings."""
     trials = sorted(p for p in set_dir.iterdir() if (p / "trial.json").is_file())
-    rows, scenes, limits, profiles = [], set(), set(), set()
+    rows, limits, profiles = [], set(), set()
     for path in trials:
         summary, _ = load_run(path)
         trial = json.loads((path / "trial.json").read_text())
         task = summary["task"]
         goal = {"room": task["goal_room"], **({"target": task["goal_target"]} if task["goal_target"] else {})}
-        rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], "goal": goal})
-        scenes.add(trial["scene"])
+        rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], "goal": goal,
+                     "scene": trial["scene"]})
         limits.add(summary["config"]["max_steps"])
         profiles.add(summary["config"]["profile"])
-    if len(scenes) != 1 or len(limits) != 1 or len(profiles) != 1:
-        raise SystemExit(f"{set_dir}: a set of trials shares one scene, step limit and profile; "
-                         f"found {sorted(scenes)}, {sorted(limits)}, {sorted(profiles)}")
+    if len(limits) != 1 or len(profiles) != 1:
+        raise SystemExit(f"{set_dir}: a set of trials shares one step limit and profile; "
+                         f"found {sorted(limits)}, {sorted(profiles)}")
+    scene = rows[0]["scene"]
+    for row in rows:  # a row names its scene only where it differs from the set's (houses)
+        if row["scene"] == scene:
+            del row["scene"]
     suite = {"name": set_dir.name, "description": f"Replays the real-VLM trials of {set_dir.name}, one row each.",
-             "scene": scenes.pop(), "repetitions": 1, "max_steps": limits.pop(), "seed": 0,
+             "scene": scene, "repetitions": 1, "max_steps": limits.pop(), "seed": 0,
              "profile": profiles.pop(), "rows": rows}
     path = set_dir / "suite.yaml"
     path.write_text(yaml.safe_dump(suite, sort_keys=False, allow_unicode=True))

@@ -43,10 +43,12 @@ def test_trials_cover_the_paper_suite() -> None:
     """The baseline plus at least 24 later episodes, over all 10 rows of the paper suite."""
     sets = {p.parent.name for p in ALL}
     assert "baseline" in sets
-    later = [p for p in ALL if p.parent.name != "baseline"]
+    later = [p for p in ALL if p.parent.name in ("after-paper", "after-plus")]
     assert len(later) >= 24, len(later)
     rows = {p.name.rsplit("-", 1)[0] for p in later}
     assert len(rows) == 10, sorted(rows)
+    for row in ("living-bathroom", "bathroom-living", "living-refrigerator", "bedroom-mirror", "bathroom-sink"):
+        assert sum(p.name.startswith(row + "-") for p in later) >= 3, row  # two-door and object rows
 
 
 @pytest.mark.parametrize("trial_dir", ALL, ids=[f"{p.parent.name}/{p.name}" for p in ALL])
