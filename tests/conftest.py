@@ -35,3 +35,16 @@ def geo_sim():
     simulator = Simulator("cabin", SimConfig(render=False))
     yield simulator
     simulator.close()
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """Debian's Chromium under Playwright (the browser tests skip where it is not installed)."""
+    from playwright.sync_api import sync_playwright
+
+    from chromium import ARGS, CHROMIUM
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        yield b
+        b.close()

@@ -14,31 +14,16 @@ import shutil
 import time
 from pathlib import Path
 
-import pytest
-
+from chromium import needs_chromium
 from live_episode import LiveEpisode
 from vlnpilot.live.app import KEYS
 from vlnpilot.record import load_run
 
-CHROMIUM = Path("/usr/bin/chromium")
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update", "--disable-sync", "--no-first-run"]
 ROOT = Path(__file__).resolve().parents[1]
 KEY_FOR = {code: key for key, code in reversed(KEYS.items())}  # the arrow or letter key of each command
 PREFERRED = ("B1", "C1", "A1", "D1", "D2")  # rotations first: a person turning in place never hits a wall
 
-pytestmark = pytest.mark.skipif(not CHROMIUM.exists(), reason=f"Debian's chromium is not installed at {CHROMIUM} "
-                                                             "(apt-get install chromium)")
-
-
-@pytest.fixture(scope="module")
-def browser():
-    from playwright.sync_api import sync_playwright
-
-    with sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        yield b
-        b.close()
+pytestmark = needs_chromium
 
 
 def open_page(browser, url: str):  # noqa: ANN001, ANN201
