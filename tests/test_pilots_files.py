@@ -15,13 +15,14 @@ import pytest
 from PIL import Image
 
 from vlnpilot import cli
+from vlnpilot.decision import DecisionError, PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import State
-from vlnpilot.pilots.base import PilotError, PilotInput, make_pilot
+from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.files import FilesPilot
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.prompting import DecisionError, build_prompt, system_prompt
+from vlnpilot.prompting import build_prompt, system_prompt
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks import parse_query
 

@@ -13,26 +13,30 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from vlnpilot.commands import COMMANDS
+from vlnpilot.decision import (
+    DOOR_POSITIONS,
+    FIELDS,
+    Decision,
+    DecisionError,
+    PilotInput,
+    normalize_decision,
+    parse_decision,
+    validate_decision,
+)
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import PROFILES, State, fsm_table, state_spec
-from vlnpilot.pilots.base import DOOR_POSITIONS, Decision, PilotInput
 from vlnpilot.prompting import (
     ASKED_STATES,
-    FIELDS,
-    DecisionError,
     Prompt,
     PromptTemplateError,
     build_prompt,
     decision_schema,
     encode_jpeg,
     map_rooms,
-    normalize_decision,
-    parse_decision,
     prompt_hash,
     render_state_prompt,
     render_state_template,
     system_prompt,
-    validate_decision,
 )
 
 CASES = [(profile, state) for profile in PROFILES for state in ASKED_STATES]

@@ -37,9 +37,10 @@ from typing import Any
 
 from PIL import Image
 
+from vlnpilot.decision import FIELDS, Decision, PilotInput, Usage, parse_decision
 from vlnpilot.errors import ConfigError
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
-from vlnpilot.prompting import FIELDS, build_prompt, parse_decision
+from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.prompting import build_prompt
 
 # The files a run writes (NNN.png, NNN.prompt.md, NNN.answer.json, their temp files, and the fixed names):
 # they decide whether DIR already holds another run, and they are the only files `overwrite` deletes.

@@ -34,10 +34,11 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from vlnpilot.commands import COMMANDS, get_command
+from vlnpilot.decision import DecisionFields, PilotInput, Usage
 from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
 from vlnpilot.fsm import PROFILES, State, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
-from vlnpilot.pilots.base import DOOR_POSITIONS, Pilot, PilotError, PilotInput, Usage, make_pilot
+from vlnpilot.pilots.base import Pilot, PilotError, make_pilot
 from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, refuse_privileged
 
 log = logging.getLogger(__name__)
@@ -97,14 +98,9 @@ class DecideRequest(BaseModel):
                               max_length=200)
 
 
-class DecideResponse(BaseModel):
+class DecideResponse(DecisionFields):
     """The pilot's Decision: the paper's five fields, plus usage and the model that answered."""
 
-    room: str
-    movement: str
-    state: str
-    description: str = ""
-    door_position: str = Field(default="not_visible", json_schema_extra={"enum": list(DOOR_POSITIONS)})
     usage: Usage
     model: str | None = None
     raw_text: str | None = None
