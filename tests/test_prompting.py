@@ -24,9 +24,8 @@ from vlnpilot.decision import (
     validate_decision,
 )
 from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import PROFILES, State, fsm_table, state_spec
+from vlnpilot.fsm import ASKED_STATES, PROFILES, State, fsm_table, state_spec
 from vlnpilot.prompting import (
-    ASKED_STATES,
     Prompt,
     PromptTemplateError,
     build_prompt,
@@ -449,3 +448,15 @@ def test_parse_prefers_the_fenced_answer_over_an_echoed_example() -> None:
     echoed = '{"room": "x", "movement": "valid_single_movement_command", "state": "next_FSM_state"}'
     reply = f"The format is {echoed}. My answer:\n```json\n{json.dumps(ANSWER)}\n```"
     assert parse_decision(reply).core() == ANSWER
+
+
+def test_the_decision_fields_have_one_definition() -> None:
+    from vlnpilot.decision import DecisionFields
+    from vlnpilot.server.app import DecideResponse
+
+    assert FIELDS == tuple(DecisionFields.model_fields) == ("room", "movement", "state", "description",
+                                                          "door_position")
+    assert tuple(Decision(room="r", movement="A1", state="Search Object").core()) == FIELDS
+    assert decision_schema(State.SEARCH_OBJECT)["required"] == list(FIELDS)
+    assert tuple(decision_schema(State.SEARCH_OBJECT)["properties"]) == FIELDS
+    assert tuple(DecideResponse.model_fields)[: len(FIELDS)] == FIELDS

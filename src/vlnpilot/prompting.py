@@ -25,13 +25,12 @@ from PIL import Image
 from vlnpilot.commands import COMMANDS, Command, Kind, get_command
 from vlnpilot.decision import DOOR_POSITIONS, FIELDS, PilotInput
 from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
-from vlnpilot.fsm import FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
+from vlnpilot.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
 from vlnpilot.success import visual_cue_values
 
 __all__ = [
     "Prompt",
     "PromptTemplateError",
-    "ASKED_STATES",
     "build_prompt",
     "decision_schema",
     "encode_jpeg",
@@ -42,8 +41,6 @@ __all__ = [
     "system_prompt",
 ]
 
-# The controller handles Start (take-off) itself and never asks in Final: every other state has a template.
-ASKED_STATES: tuple[State, ...] = tuple(s for s in State if s not in (State.START, State.FINAL))
 
 
 class PromptTemplateError(VLNPilotError):
