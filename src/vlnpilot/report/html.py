@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.fileio import write_atomic
 from vlnpilot.report.timeline import Entry, Episode, load_episode, load_scene_or_none
 
 REPORT = "report.html"
@@ -636,10 +637,7 @@ def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) 
         (run_dir / FLOORPLAN).write_bytes(plan.png())
     page = render_episode_report(ep, plan_file, plan)
     path = Path(out) if out is not None else run_dir / REPORT
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, page)
 
 
 # -- the benchmark page ---------------------------------------------------------------------------------
@@ -933,7 +931,4 @@ def write_bench_report(bench_dir: str | Path, *, episode_reports: bool = True) -
     plot_files = bench_plots(data, data.bench_dir / PLOTS) if data.records else []
     page = render_bench_report(data, plot_files)
     path = data.bench_dir / REPORT
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, page)
