@@ -166,7 +166,7 @@ def test_render_state_template_accepts_a_matching_template() -> None:
         (GOOD + "- `Go Through Door`: again.\n", "duplicated"),
         (GOOD.replace("Use `A1`", "Use `B1`"), "not allowed in"),  # prose names a disallowed command
         (GOOD.replace("$movement_commands", "none"), "movement_commands"),
-        (GOOD.replace("$goal", "$lateral_moves"), "placeholder"),  # no lateral moves in this state
+        (GOOD.replace("$goal", "$slide_left"), "placeholder"),  # no lateral moves in this state
         (GOOD.replace("## OUTPUT STATE RULES", "## RULES"), "OUTPUT STATE RULES"),
     ],
 )

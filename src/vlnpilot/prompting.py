@@ -166,9 +166,6 @@ def render_state_template(template: str, spec: StateSpec, *, where: str = "state
     groups = {
         "forward_moves": of(Kind.FORWARD),
         "rotations": of(Kind.ROTATE_RIGHT, Kind.ROTATE_LEFT),
-        "right_rotations": of(Kind.ROTATE_RIGHT),
-        "left_rotations": of(Kind.ROTATE_LEFT),
-        "lateral_moves": of(Kind.LATERAL_LEFT, Kind.LATERAL_RIGHT),
     }
     values.update({name: _prose_codes(codes) for name, codes in groups.items() if codes})  # empty group: KeyError below
     # Direction words come from the command table, so a template cannot pair a code with the wrong direction.

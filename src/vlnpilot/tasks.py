@@ -16,7 +16,7 @@ from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State
 from vlnpilot.scene.model import Scene, _norm
 from vlnpilot.success import DEFAULT_SUCCESS, SuccessConfig
-from vlnpilot.types import GroundTruth, Pose, wrap_deg
+from vlnpilot.types import GroundTruth, Pose
 
 
 class QueryError(VLNPilotError, ValueError):
@@ -152,6 +152,3 @@ def spl(success: bool, shortest: float, taken: float) -> float:
         return 1.0
     return shortest / max(taken, shortest)
 
-
-def facing_error_deg(pose: Pose, x: float, y: float) -> float:
-    return wrap_deg(math.degrees(math.atan2(y - pose.y, x - pose.x)) - pose.yaw_deg)

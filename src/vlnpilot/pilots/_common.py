@@ -430,7 +430,7 @@ class ModelPilot:
 
 def _httpx_errors(name: str) -> tuple[type[BaseException], ...]:
     out: list[type[BaseException]] = []
-    for module in ("httpx", "httpx2"):
+    for module in ("httpx", "httpx2"):  # google-genai (and openai, anthropic) use both: not dead
         try:
             mod = __import__(module)
         except ImportError:

@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.errors import UnknownNameError, VLNPilotError
-from vlnpilot.types import GroundTruth
 
 
 class PilotError(VLNPilotError):
@@ -31,13 +30,6 @@ class Pilot(Protocol):
     model: str | None
 
     def decide(self, pilot_input: PilotInput) -> Decision: ...
-
-
-class PrivilegedPilot(Pilot, Protocol):
-    privileged: ClassVar[bool]
-
-    def attach(self, ground_truth: GroundTruth) -> None:
-        """Receive the narrow ground-truth interface at the start of an episode."""
 
 
 PilotFactory = Callable[..., Pilot]

@@ -79,16 +79,6 @@ def _image_size(path: Path) -> tuple[int, int] | None:
         return None
 
 
-def _room_name(scene: Any, room_id: str | None) -> str:
-    if not room_id:
-        return "–"
-    if scene is not None:
-        found = scene.find_room(room_id)
-        if found is not None:
-            return found.name
-    return str(room_id)
-
-
 def _room_chip(scene: Any, room_id: str | None) -> str:
     """A room name with a swatch of its floor-plan colour (the paper's colours); plain text when unknown."""
     room = scene.find_room(room_id) if scene is not None and room_id else None
