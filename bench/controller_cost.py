@@ -28,9 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from vlnpilot.decision import PilotInput, normalize_decision, parse_decision, validate_decision
 from vlnpilot.fsm import State
-from vlnpilot.pilots.base import PilotInput
-from vlnpilot.prompting import build_prompt, normalize_decision, parse_decision, validate_decision
+from vlnpilot.prompting import build_prompt
 from vlnpilot.record import Recorder
 from vlnpilot.scene import load_scene
 

@@ -32,7 +32,7 @@ class Spinner:
     model = "spinner"
 
     def decide(self, pilot_input):  # noqa: ANN001, ANN201 - the Pilot protocol
-        from vlnpilot.pilots.base import Decision, Usage
+        from vlnpilot.decision import Decision, Usage
 
         return Decision(room="living_room", movement="C1", state="Recognize Room",
                         description=f"Turning to look around the room (step {pilot_input.step}).",

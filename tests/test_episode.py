@@ -11,13 +11,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vlnpilot.commands import COMMANDS, get_command
+from vlnpilot.decision import Decision, DecisionError, PilotInput
 from vlnpilot.episode import OUTCOMES, EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fsm import FINAL_STATES, State, parse_state, state_spec
 from vlnpilot.pilots._common import TRANSIENT_REASONS
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, make_pilot
+from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.prompting import DecisionError
 from vlnpilot.scene.model import Spawn
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks import parse_query
@@ -217,6 +217,27 @@ def test_invalid_answer_is_reasked_with_the_reason_then_executed_when_valid(geo:
     assert "next state 'Go Through Door' is not allowed" in pilot.inputs[2].feedback[0]
     assert env.executed == [(1, "C1")]
     assert result.invalid_decisions == 0 and result.outcome == "max_steps"
+
+
+def test_a_decision_is_validated_once(geo: Simulator, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A pilot that validates its own decisions (ModelPilot) is not validated again; any other pilot is."""
+    import vlnpilot.episode as episode
+
+    seen: list[str] = []
+
+    def spy(decision: Decision, state: State, profile: str = "paper") -> str | None:
+        seen.append(decision.movement)
+        return None
+
+    monkeypatch.setattr(episode, "validate_decision", spy)
+    query, config = parse_query("Go to the bathroom", geo.scene), EpisodeConfig(max_steps=2)
+    run_episode(geo, ScriptedPilot([], default=answer("C1", "Recognize Room")), query, config, spawn="bedroom")
+    assert seen == ["C1", "C1"]
+    seen.clear()
+    trusted = ScriptedPilot([], default=answer("C1", "Recognize Room"))
+    trusted.validates_decisions = True  # type: ignore[attr-defined]
+    result = run_episode(geo, trusted, query, config, spawn="bedroom")
+    assert seen == [] and result.steps == 2 and result.invalid_decisions == 0
 
 
 def test_pilot_inputs_carry_state_and_previous_movement(geo: Simulator) -> None:

@@ -6,7 +6,7 @@ import pytest
 
 from vlnpilot.commands import COMMANDS
 from vlnpilot.errors import UnknownNameError
-from vlnpilot.fsm import FINAL_STATES, PROFILES, State, fsm_table, parse_state, state_spec
+from vlnpilot.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, fsm_table, parse_state, state_spec
 
 # The paper's Table 3 verbatim: state and goal, allowed moves, next states (ranges as the paper writes them).
 PAPER_TABLE_3 = [
@@ -160,3 +160,18 @@ def test_parse_state_rejects_unknown_listing_the_states() -> None:
 def test_unknown_profile_lists_the_profiles() -> None:
     with pytest.raises(UnknownNameError, match="paper, fast|fast, paper"):
         fsm_table("turbo")
+
+
+def test_asked_states_are_defined_once_and_read_by_prompts_server_and_plans() -> None:
+    from typing import get_args
+
+    from vlnpilot.prompting import render_state_prompt
+    from vlnpilot.report.floorplan import STATE_COLORS
+    from vlnpilot.server.app import AskedState
+
+    assert State.START not in ASKED_STATES and State.FINAL not in ASKED_STATES
+    assert set(ASKED_STATES) == set(State) - {State.START, State.FINAL}
+    assert get_args(AskedState) == tuple(s.value for s in ASKED_STATES)
+    assert list(STATE_COLORS) == [s.value for s in ASKED_STATES]
+    for state in ASKED_STATES:
+        assert render_state_prompt(state)

@@ -14,9 +14,10 @@ from typer.testing import CliRunner
 
 from fakes import FakeOpenAI
 from vlnpilot.cli import app
+from vlnpilot.decision import PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.fsm import parse_state
-from vlnpilot.pilots.base import PilotInput, make_pilot
+from vlnpilot.pilots.base import make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.tasks import parse_query

@@ -11,10 +11,10 @@ from typing import Any
 
 import pytest
 
+from vlnpilot.decision import PilotInput
 from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State, state_spec
-from vlnpilot.pilots.base import PilotInput
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks import parse_query

@@ -8,12 +8,12 @@ import time
 
 import pytest
 
+from vlnpilot.decision import DecisionError, parse_decision
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots import _common
 from vlnpilot.pilots._common import (
     Secret,
     call_with_retries,
-    decision_error_code,
     parse_retry_after,
     redact,
     resolve_api_key,
@@ -21,7 +21,6 @@ from vlnpilot.pilots._common import (
 )
 from vlnpilot.pilots.base import PilotError, known_pilots
 from vlnpilot.pricing import DEFAULT_PRICES, PRICES_AS_OF, Price, cost_usd, find_price, load_prices
-from vlnpilot.prompting import DecisionError, parse_decision
 
 
 def test_model_pilots_are_registered():
@@ -168,11 +167,13 @@ def test_resolve_api_key(monkeypatch):
     ('{"room": "hall"}', "missing_field"),
     ('{"room": "hall", "movement": 3, "state": "x"}', "invalid_value"),
     ('{"room": "hall", "movement": "A1", "state": "x", "door_position": "up"}', "invalid_enum"),
+    ('{"room": null, "movement": "A1", "state": null}', "missing_field"),
+    (b"{}", "invalid_value"),
 ])
 def test_decision_error_codes(text, code):
     with pytest.raises(DecisionError) as info:
         parse_decision(text)
-    assert decision_error_code(info.value.reason) == code
+    assert info.value.code == code and code in _common.REPLY_REASONS  # the pilot raises it as its reason
 
 
 def test_reply_reasons_are_distinct_from_transient_ones():

@@ -8,10 +8,11 @@ import httpx
 import pytest
 
 from fakes import ScriptedPilot, ServerThread, free_port, sample_input
+from vlnpilot.decision import Usage
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import State
 from vlnpilot.pilots._common import PilotReplyError
-from vlnpilot.pilots.base import PilotError, Usage, make_pilot
+from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.remote import RemotePilot
 from vlnpilot.server import create_app
 

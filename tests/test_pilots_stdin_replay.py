@@ -12,14 +12,15 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from vlnpilot import cli
+from vlnpilot.decision import Decision, DecisionError, PilotInput, parse_decision
 from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import State
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, make_pilot
+from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.pilots.replay import ReplayPilot
 from vlnpilot.pilots.stdin import StdinPilot
-from vlnpilot.prompting import DecisionError, parse_decision, system_prompt
+from vlnpilot.prompting import system_prompt
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks import parse_query

@@ -13,26 +13,29 @@ from hypothesis import strategies as st
 from PIL import Image
 
 from vlnpilot.commands import COMMANDS
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import PROFILES, State, fsm_table, state_spec
-from vlnpilot.pilots.base import DOOR_POSITIONS, Decision, PilotInput
-from vlnpilot.prompting import (
-    ASKED_STATES,
+from vlnpilot.decision import (
+    DOOR_POSITIONS,
     FIELDS,
+    Decision,
     DecisionError,
+    PilotInput,
+    normalize_decision,
+    parse_decision,
+    validate_decision,
+)
+from vlnpilot.errors import ConfigError
+from vlnpilot.fsm import ASKED_STATES, PROFILES, State, fsm_table, state_spec
+from vlnpilot.prompting import (
     Prompt,
     PromptTemplateError,
     build_prompt,
     decision_schema,
     encode_jpeg,
     map_rooms,
-    normalize_decision,
-    parse_decision,
     prompt_hash,
     render_state_prompt,
     render_state_template,
     system_prompt,
-    validate_decision,
 )
 
 CASES = [(profile, state) for profile in PROFILES for state in ASKED_STATES]
@@ -163,7 +166,7 @@ def test_render_state_template_accepts_a_matching_template() -> None:
         (GOOD + "- `Go Through Door`: again.\n", "duplicated"),
         (GOOD.replace("Use `A1`", "Use `B1`"), "not allowed in"),  # prose names a disallowed command
         (GOOD.replace("$movement_commands", "none"), "movement_commands"),
-        (GOOD.replace("$goal", "$lateral_moves"), "placeholder"),  # no lateral moves in this state
+        (GOOD.replace("$goal", "$slide_left"), "placeholder"),  # no lateral moves in this state
         (GOOD.replace("## OUTPUT STATE RULES", "## RULES"), "OUTPUT STATE RULES"),
     ],
 )
@@ -445,3 +448,15 @@ def test_parse_prefers_the_fenced_answer_over_an_echoed_example() -> None:
     echoed = '{"room": "x", "movement": "valid_single_movement_command", "state": "next_FSM_state"}'
     reply = f"The format is {echoed}. My answer:\n```json\n{json.dumps(ANSWER)}\n```"
     assert parse_decision(reply).core() == ANSWER
+
+
+def test_the_decision_fields_have_one_definition() -> None:
+    from vlnpilot.decision import DecisionFields
+    from vlnpilot.server.app import DecideResponse
+
+    assert FIELDS == tuple(DecisionFields.model_fields) == ("room", "movement", "state", "description",
+                                                          "door_position")
+    assert tuple(Decision(room="r", movement="A1", state="Search Object").core()) == FIELDS
+    assert decision_schema(State.SEARCH_OBJECT)["required"] == list(FIELDS)
+    assert tuple(decision_schema(State.SEARCH_OBJECT)["properties"]) == FIELDS
+    assert tuple(DecideResponse.model_fields)[: len(FIELDS)] == FIELDS

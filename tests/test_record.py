@@ -8,9 +8,9 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
 from vlnpilot.errors import ConfigError
-from vlnpilot.pilots.base import Decision, PilotInput
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.prompting import prompt_hash
 from vlnpilot.record import EPISODE, FRAMES, SUMMARY, Recorder, check_writable, default_run_dir, load_run

@@ -13,10 +13,11 @@ from hypothesis import strategies as st
 from vlnpilot import tello_spec
 from vlnpilot.bench.suite import load_suite
 from vlnpilot.commands import COMMANDS, HOVER, get_command
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fsm import State
-from vlnpilot.pilots.base import Decision, PilotInput, make_pilot
+from vlnpilot.pilots.base import make_pilot
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.safety import (
     ASSIST_NOTE,

@@ -206,3 +206,15 @@ def test_path_length() -> None:
     assert path.value() == pytest.approx(0.5)
     path.reset()
     assert path.value() == 0.0
+
+
+def test_the_opposite_of_every_direction_is_its_mirror_in_the_command_table() -> None:
+    from vlnpilot.commands import COMMANDS, OPPOSITE
+
+    for kind, opposite in OPPOSITE.items():
+        assert OPPOSITE[opposite] is kind  # an involution
+        for code, command in COMMANDS.items():
+            if command.kind is kind:  # B1 <-> C1, D1 <-> D2: the same amount, the mirrored motion
+                mirror = next(c for c in COMMANDS.values() if c.kind is opposite and c.amount == command.amount)
+                m, r = command.motion(), mirror.motion()
+                assert (m.yaw_deg, m.lateral_m) == (-r.yaw_deg, -r.lateral_m), code

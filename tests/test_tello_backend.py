@@ -12,9 +12,10 @@ from typer.testing import CliRunner
 from tello_support import emulator_config, loopback_only, rig, tello_config  # noqa: F401  (autouse guard)
 from vlnpilot import cli
 from vlnpilot.commands import get_command
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
-from vlnpilot.pilots.base import Decision, PilotInput, make_pilot
+from vlnpilot.pilots.base import make_pilot
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import TelloEmulator

@@ -15,9 +15,9 @@ import pytest
 
 from tello_support import LOCAL_PORT, STATE_PORT, emulator_config, free_udp_port, loopback_only, rig  # noqa: F401
 from vlnpilot import cli
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
-from vlnpilot.pilots.base import Decision, PilotInput
 from vlnpilot.record import Recorder, load_run
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import TelloEmulator

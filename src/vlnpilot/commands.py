@@ -82,6 +82,9 @@ COMMANDS: dict[str, Command] = {
 }
 
 HOVER = COMMANDS["E"]
+# The reverse of each rotation and sideways direction: a move followed by its opposite is an oscillation.
+OPPOSITE: dict[Kind, Kind] = {Kind.ROTATE_LEFT: Kind.ROTATE_RIGHT, Kind.ROTATE_RIGHT: Kind.ROTATE_LEFT,
+                              Kind.LATERAL_LEFT: Kind.LATERAL_RIGHT, Kind.LATERAL_RIGHT: Kind.LATERAL_LEFT}
 
 
 def get_command(code: str) -> Command:

@@ -8,7 +8,7 @@ from typing import Protocol, runtime_checkable
 from vlnpilot.commands import Command
 from vlnpilot.errors import ConfigError
 from vlnpilot.scene.model import Scene, Spawn
-from vlnpilot.types import GroundTruth, Observation, Pose
+from vlnpilot.types import Observation, Pose
 
 
 @runtime_checkable
@@ -22,10 +22,6 @@ class Environment(Protocol):
 
     def step(self, command: Command | str) -> Observation:
         """Execute one command of the table and observe."""
-
-
-class HasGroundTruth(Protocol):
-    def ground_truth(self) -> GroundTruth: ...
 
 
 @dataclass(frozen=True)

@@ -23,15 +23,16 @@ from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, context_name, context_preset
+from vlnpilot.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
 from vlnpilot.environment import Environment, capabilities_of
 from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
 from vlnpilot.overrides import override_reason
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
-from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput, Usage
+from vlnpilot.pilots.base import Pilot, PilotError
 from vlnpilot.pilots.keyboard import HUMAN
-from vlnpilot.prompting import DecisionError, normalize_decision, prompt_hash, validate_decision
+from vlnpilot.prompting import prompt_hash
 from vlnpilot.record import Recorder, git_sha, package_versions
 from vlnpilot.safety import (
     OVERLAYS,
@@ -161,12 +162,15 @@ class _Answer:
 
 def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> _Answer:
     try:
-        decision = normalize_decision(pilot.decide(pin))
+        decision = pilot.decide(pin)
     except PilotError as exc:
         return _Answer(None, f"{exc.reason}: {exc}", exc.fatal, getattr(exc, "usage", None) or Usage(),
                        getattr(exc, "raw_text", None), exc.reason, getattr(exc, "feedback", None))
     except DecisionError as exc:
         return _Answer(None, f"malformed answer: {exc}", raw_text=exc.raw_text, kind="malformed")
+    if getattr(pilot, "validates_decisions", False):  # a model pilot checked it against this very state: once
+        return _Answer(decision, usage=decision.usage, raw_text=decision.raw_text)
+    decision = normalize_decision(decision)
     error = validate_decision(decision, state, profile)
     return _Answer(decision, error, usage=decision.usage, raw_text=decision.raw_text,
                    kind="invalid_decision" if error else None)

@@ -127,6 +127,8 @@ _PAPER_TABLE: tuple[StateSpec, ...] = (
 # Profiles change allowed moves only, never the transitions. `paper` is Table 3 verbatim.
 # `fast` lets the navigation states fly longer forward moves (use it with a safety shield).
 FINAL_STATES = frozenset(s.state for s in _PAPER_TABLE if s.final)
+# The states in which the pilot is asked: the controller handles Start (take-off) itself and never asks in Final.
+ASKED_STATES: tuple[State, ...] = tuple(s for s in State if s not in (State.START, State.FINAL))
 _FAST_EXTRA: dict[State, tuple[str, ...]] = {
     S.RECOGNIZE_ROOM: ("A2",),
     S.SEARCH_OPEN_DOOR: ("A2", "A3"),

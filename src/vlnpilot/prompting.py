@@ -1,4 +1,4 @@
-"""Prompts and the model-answer contract of the paper's "VLLM Module" (Appendices A-D).
+"""Prompts of the paper's "VLLM Module" (Appendices A-C); reading the answer is `vlnpilot.decision`'s job.
 
 The prompt has three parts: a system prompt identical for every episode (Appendix A + the output format of
 Appendix C), the episode context (query + topological map), and a per-state prompt (Appendix B) whose
@@ -8,12 +8,11 @@ so that prompt, JSON schema and validation cannot disagree. The wording lives in
 
 from __future__ import annotations
 
-import ast
 import hashlib
 import io
 import json
 import re
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from functools import cache
 from importlib.resources import files
@@ -24,42 +23,24 @@ import numpy as np
 from PIL import Image
 
 from vlnpilot.commands import COMMANDS, Command, Kind, get_command
+from vlnpilot.decision import DOOR_POSITIONS, FIELDS, PilotInput
 from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
-from vlnpilot.fsm import FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
-from vlnpilot.pilots.base import DOOR_POSITIONS, Decision, PilotInput
+from vlnpilot.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
 from vlnpilot.success import visual_cue_values
 
 __all__ = [
-    "DecisionError",
     "Prompt",
     "PromptTemplateError",
-    "ASKED_STATES",
-    "FIELDS",
     "build_prompt",
     "decision_schema",
     "encode_jpeg",
     "map_rooms",
-    "normalize_decision",
-    "parse_decision",
     "prompt_hash",
     "render_state_prompt",
     "render_state_template",
     "system_prompt",
-    "validate_decision",
 ]
 
-FIELDS: tuple[str, ...] = ("room", "movement", "state", "description", "door_position")
-# The controller handles Start (take-off) itself and never asks in Final: every other state has a template.
-ASKED_STATES: tuple[State, ...] = tuple(s for s in State if s not in (State.START, State.FINAL))
-
-
-class DecisionError(VLNPilotError):
-    """A model reply that cannot be read as a Decision; `reason` says why in one line (it is fed back on a re-ask)."""
-
-    def __init__(self, reason: str, raw_text: str | None = None):
-        super().__init__(reason)
-        self.reason = reason
-        self.raw_text = raw_text
 
 
 class PromptTemplateError(VLNPilotError):
@@ -185,9 +166,6 @@ def render_state_template(template: str, spec: StateSpec, *, where: str = "state
     groups = {
         "forward_moves": of(Kind.FORWARD),
         "rotations": of(Kind.ROTATE_RIGHT, Kind.ROTATE_LEFT),
-        "right_rotations": of(Kind.ROTATE_RIGHT),
-        "left_rotations": of(Kind.ROTATE_LEFT),
-        "lateral_moves": of(Kind.LATERAL_LEFT, Kind.LATERAL_RIGHT),
     }
     values.update({name: _prose_codes(codes) for name, codes in groups.items() if codes})  # empty group: KeyError below
     # Direction words come from the command table, so a template cannot pair a code with the wrong direction.
@@ -362,175 +340,3 @@ def prompt_hash(profile: str = "paper") -> str:
     for part in parts:
         h.update(part.encode("utf-8") + b"\x00")
     return h.hexdigest()[:12]
-
-
-# ------------------------------------------------------------------------------------------------------ answers
-
-_MAX_TEXT = 100_000  # characters of a reply that are searched for the JSON object
-_MAX_STARTS = 200  # '{' positions tried (bounds the work on adversarial replies)
-_MAX_OBJECT = 8_000  # characters a Python-dict style answer may span
-_DICT_START_RE = re.compile(r"\{\s*['\"]")
-_FENCE_RE = re.compile(r"```[ \t]*([A-Za-z0-9_+-]*)[ \t]*\n?(.*?)```", re.S)
-_DOOR_ALIASES = {"centre": "center", "middle": "center", "notvisible": "not_visible", "none": "not_visible"}
-
-
-def _balanced_end(text: str, start: int) -> int | None:
-    """Index of the '}' closing the '{' at `start`, skipping '...' and "..." strings; None if unbalanced."""
-    depth, quote, escaped = 0, "", False
-    for i in range(start, min(len(text), start + _MAX_OBJECT)):
-        ch = text[i]
-        if quote:
-            if escaped:
-                escaped = False
-            elif ch == "\\":
-                escaped = True
-            elif ch == quote:
-                quote = ""
-        elif ch in "\"'":
-            quote = ch
-        elif ch == "{":
-            depth += 1
-        elif ch == "}":
-            depth -= 1
-            if depth == 0:
-                return i
-    return None
-
-
-def _decode_at(text: str, start: int) -> Any:
-    try:
-        return json.JSONDecoder().raw_decode(text, start)[0]
-    except (ValueError, RecursionError):
-        pass
-    if not _DICT_START_RE.match(text, start):
-        return None
-    end = _balanced_end(text, start)
-    if end is None:
-        return None
-    try:  # the paper's Appendix D: a Python dict with single quotes
-        return ast.literal_eval(text[start : end + 1])
-    except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
-        return None
-
-
-def _dicts(text: str) -> Iterator[dict]:
-    """Every dict found in the reply: fenced blocks first, then the whole text, outer objects before inner ones."""
-    sources = [m.group(2) for m in _FENCE_RE.finditer(text)] + [text]
-    tried = 0
-    for source in sources:
-        for match in re.finditer(r"\{", source):
-            tried += 1
-            if tried > _MAX_STARTS:
-                return
-            obj = _decode_at(source, match.start())
-            if isinstance(obj, dict):
-                yield obj
-
-
-def _string_field(obj: Mapping[str, Any], name: str, default: str | None = None) -> str:
-    value = obj.get(name, default)
-    if value is None:
-        if default is None:
-            raise DecisionError(f"field {name!r} is missing or null")
-        value = default
-    if not isinstance(value, str):
-        raise DecisionError(f"field {name!r} must be a string, got {type(value).__name__} {value!r:.60}")
-    return value.strip()
-
-
-def parse_decision(text: str) -> Decision:
-    """Read a Decision out of a model reply (JSON, fenced JSON, prose around it, or Appendix D's Python dict).
-
-    Raises DecisionError(reason) when there is no object, a field is missing or mistyped, or door_position is
-    not one of left/center/right/not_visible. Movement and state are kept as written (see validate_decision).
-    """
-    if not isinstance(text, str):
-        raise DecisionError(f"the reply must be text, got {type(text).__name__}")
-    searched = text[:_MAX_TEXT]
-    found: dict | None = None
-    partial: dict | None = None
-    for obj in _dicts(searched):
-        keys = {str(k).strip().lower(): v for k, v in obj.items()}
-        if {"movement", "state"} <= keys.keys():
-            found = keys
-            break
-        if partial is None and keys.keys() & set(FIELDS):
-            partial = keys
-    if found is None:
-        if partial is not None:
-            missing = [f for f in ("room", "movement", "state") if f not in partial]
-            raise DecisionError(f"the JSON object lacks the field(s) {', '.join(missing)}", text)
-        raise DecisionError(
-            f"no JSON object with the fields {', '.join(FIELDS)} found in the reply ({len(text)} characters)", text
-        )
-    if "room" not in found:
-        raise DecisionError("the JSON object lacks the field(s) room", text)
-    try:
-        room = _string_field(found, "room", "unknown")
-        movement = _string_field(found, "movement")
-        state = _string_field(found, "state")
-        description = _string_field(found, "description", "")
-        door = _string_field(found, "door_position", "not_visible").lower()
-    except DecisionError as exc:
-        raise DecisionError(exc.reason, text) from None
-    door = re.sub(r"[\s\-]+", "_", door)
-    door = _DOOR_ALIASES.get(door.replace("_", ""), door)
-    if door not in DOOR_POSITIONS:
-        raise DecisionError(f"door_position {door!r:.60} is not one of {', '.join(DOOR_POSITIONS)}", text)
-    return Decision(
-        room=room or "unknown",
-        movement=movement,
-        state=state,
-        description=description,
-        door_position=door,  # type: ignore[arg-type]
-        raw_text=text,
-    )
-
-
-def validate_decision(decision: Decision, state: State, profile: str = "paper") -> str | None:
-    """None if the decision's movement and next state are allowed in `state`, else a one-line reason.
-
-    The reason names the valid choices so that it can be fed back to the model on a re-ask.
-    """
-    spec = state_spec(state, profile)
-    reasons: list[str] = []
-    allowed_moves = ", ".join(spec.moves)
-    allowed_next = ", ".join(f"'{s.value}'" for s in spec.next_states)
-    nxt: State | None = None
-    try:
-        nxt = parse_state(decision.state)
-    except UnknownNameError:
-        reasons.append(f"next state {decision.state!r:.60} is not an FSM state; allowed from '{spec.state}': "
-                       f"{allowed_next}")
-    else:
-        if nxt not in spec.next_states:
-            reasons.append(f"next state '{nxt.value}' is not allowed from '{spec.state}'; allowed: {allowed_next}")
-    try:
-        code = get_command(decision.movement).code
-    except UnknownNameError:
-        reasons.insert(0, f"movement {decision.movement!r:.40} is not a movement command; allowed in "
-                          f"'{spec.state}': {allowed_moves}")
-    else:
-        if not spec.allows(code, nxt if nxt in spec.next_states else spec.state):
-            why = f"movement {code!r} is not allowed in state '{spec.state}'; allowed: {allowed_moves}"
-            if nxt is not None and nxt is not spec.state and code in state_spec(nxt, profile).moves:
-                why += (f" (the movement is flown now, in '{spec.state}'; the moves of '{nxt.value}' apply from "
-                        "the next step)")
-            reasons.insert(0, why)
-    return "; ".join(reasons) or None
-
-
-def normalize_decision(decision: Decision) -> Decision:
-    """The decision with its canonical movement code ('a1' -> 'A1') and state value ('search object' -> 'Search
-    Object'); a field that names no command or state is left as written (validate_decision reports it)."""
-    update: dict[str, str] = {}
-    try:
-        update["movement"] = get_command(decision.movement).code
-    except UnknownNameError:
-        pass
-    try:
-        update["state"] = parse_state(decision.state).value
-    except UnknownNameError:
-        pass
-    return decision.model_copy(update=update)
-

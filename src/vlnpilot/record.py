@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import functools
 import json
-import os
 import platform
 import shutil
 import subprocess
@@ -29,6 +28,7 @@ import numpy as np
 from PIL import Image
 
 from vlnpilot.errors import ConfigError
+from vlnpilot.fileio import write_atomic
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
 # Everything a run and its report write: what `overwrite` removes, and what marks a directory as holding a run.
@@ -117,9 +117,7 @@ def _jsonable(value: Any) -> Any:
 
 def write_json_atomic(path: Path, data: Any) -> None:
     """Write JSON through a temporary file and rename, so a reader never sees half a file."""
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(json.dumps(_jsonable(data), indent=2, sort_keys=False) + "\n")
-    os.replace(tmp, path)
+    write_atomic(path, json.dumps(_jsonable(data), indent=2, sort_keys=False) + "\n")
 
 
 class Recorder:

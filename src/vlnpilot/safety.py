@@ -62,7 +62,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from vlnpilot import tello_spec
-from vlnpilot.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.commands import COMMANDS, HOVER, OPPOSITE, Command, Kind
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fsm import State
 from vlnpilot.scene.model import Door, Scene
@@ -481,10 +481,6 @@ class DoorAssist:
 
 
 # -- oscillation guard ----------------------------------------------------------------------------------------------
-_OPPOSITE = {Kind.ROTATE_LEFT: Kind.ROTATE_RIGHT, Kind.ROTATE_RIGHT: Kind.ROTATE_LEFT,
-             Kind.LATERAL_LEFT: Kind.LATERAL_RIGHT, Kind.LATERAL_RIGHT: Kind.LATERAL_LEFT}
-
-
 class OscillationGuard:
     """Detects a pilot that reverses rotation or lateral direction again and again without progress."""
 
@@ -514,7 +510,7 @@ class OscillationGuard:
             self.committed = self.veto_pending = False
         self._state = state
         axis = self._axis(command.kind)
-        reversal = axis is not None and self._last_proposed.get(axis) is _OPPOSITE[command.kind]
+        reversal = axis is not None and self._last_proposed.get(axis) is OPPOSITE[command.kind]
         if axis is not None:
             self._last_proposed[axis] = command.kind
         self._window.append(reversal)
@@ -527,7 +523,7 @@ class OscillationGuard:
     def reverses(self, command: Command) -> bool:
         """Whether `command` reverses the last executed direction on its axis."""
         axis = self._axis(command.kind)
-        return axis is not None and self._last_executed.get(axis) is _OPPOSITE[command.kind]
+        return axis is not None and self._last_executed.get(axis) is OPPOSITE[command.kind]
 
     def executed(self, command: Command) -> None:
         axis = self._axis(command.kind)

@@ -11,12 +11,12 @@ import math
 import re
 from dataclasses import dataclass
 
-from vlnpilot.commands import Command, Kind
+from vlnpilot.commands import OPPOSITE, Command, Kind
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State
 from vlnpilot.scene.model import Scene, _norm
 from vlnpilot.success import DEFAULT_SUCCESS, SuccessConfig
-from vlnpilot.types import GroundTruth, Pose, wrap_deg
+from vlnpilot.types import GroundTruth, Pose
 
 
 class QueryError(VLNPilotError, ValueError):
@@ -129,16 +129,13 @@ class PathLength:
 class Oscillations:
     """Direction reversals of rotation or lateral moves in a row (C after B, D2 after D1, ...)."""
 
-    _OPPOSITE = {Kind.ROTATE_LEFT: Kind.ROTATE_RIGHT, Kind.ROTATE_RIGHT: Kind.ROTATE_LEFT,
-                 Kind.LATERAL_LEFT: Kind.LATERAL_RIGHT, Kind.LATERAL_RIGHT: Kind.LATERAL_LEFT}
-
     def reset(self) -> None:
         self.count = 0
         self._last: Kind | None = None
 
     def update(self, executed: Command) -> bool:
         """Count `executed`; True when it reverses the previous move."""
-        reversal = self._last is not None and self._OPPOSITE.get(executed.kind) is self._last
+        reversal = self._last is not None and OPPOSITE.get(executed.kind) is self._last
         self.count += reversal
         self._last = executed.kind
         return reversal
@@ -155,6 +152,3 @@ def spl(success: bool, shortest: float, taken: float) -> float:
         return 1.0
     return shortest / max(taken, shortest)
 
-
-def facing_error_deg(pose: Pose, x: float, y: float) -> float:
-    return wrap_deg(math.degrees(math.atan2(y - pose.y, x - pose.x)) - pose.yaw_deg)

@@ -6,7 +6,8 @@ import threading
 from collections import deque
 from typing import Any
 
-from vlnpilot.pilots.base import Decision, PilotInput, Usage, register_pilot
+from vlnpilot.decision import Decision, PilotInput, Usage
+from vlnpilot.pilots.base import register_pilot
 
 DEFAULT_DECISION = Decision(room="hall", movement="A1", state="Search Object", description="scripted",
                             door_position="left", usage=Usage(input_tokens=10, output_tokens=5, cost_usd=0.001))

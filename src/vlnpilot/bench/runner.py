@@ -36,6 +36,7 @@ from vlnpilot.bench.results import RESULTS, PilotSummary, ResultsLog, episode_ke
 from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dict
 from vlnpilot.bench.tables import render_tables
 from vlnpilot.errors import ConfigError, UnknownNameError
+from vlnpilot.fileio import write_atomic
 from vlnpilot.fsm import PROFILES
 from vlnpilot.record import check_writable, default_run_dir, git_sha, package_versions, write_json_atomic
 
@@ -262,11 +263,7 @@ def write_tables(out: str | Path) -> list[Path]:
     records = [r for r in ResultsLog(out / RESULTS).read() if r["pilot"] in pilots]
     paths = []
     for name, text in render_tables(suite, pilots, records, manifest.get("config_hash")).items():
-        path = out / name
-        tmp = path.with_suffix(path.suffix + ".tmp")
-        tmp.write_text(text, encoding="utf-8")
-        os.replace(tmp, path)
-        paths.append(path)
+        paths.append(write_atomic(out / name, text))
     return paths
 
 

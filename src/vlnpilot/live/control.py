@@ -11,10 +11,11 @@ from __future__ import annotations
 import threading
 from typing import Any
 
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import Gate
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import state_spec
-from vlnpilot.pilots.base import Decision, Pilot, PilotError, PilotInput
+from vlnpilot.pilots.base import Pilot, PilotError
 from vlnpilot.pilots.keyboard import KeyboardPilot, human_decision
 
 ACTIONS = ("pause", "resume", "stop", "take_over", "hand_back", "command")

@@ -19,9 +19,22 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, Literal, TypeVar
 
 from vlnpilot import pricing
+from vlnpilot.decision import (
+    DECISION_ERROR_CODES,
+    INVALID_ENUM,
+    MAX_REPLY_CHARS,
+    TOO_LONG,
+    Decision,
+    DecisionError,
+    PilotInput,
+    Usage,
+    normalize_decision,
+    parse_decision,
+    validate_decision,
+)
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots._gate import CallGate
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage
+from vlnpilot.pilots.base import PilotError
 
 log = logging.getLogger(__name__)
 _UNPRICED_WARNED: set[tuple[str, str]] = set()
@@ -31,8 +44,7 @@ T = TypeVar("T")
 # them to 503, everything else to 502.
 TRANSIENT_REASONS = frozenset({"rate_limited", "unavailable", "timeout", "connection_error"})
 # Reasons of a reply that arrived but cannot be used; the controller re-asks (at most twice).
-REPLY_REASONS = frozenset({"refusal", "content_filter", "truncated", "empty", "not_json", "missing_field",
-                           "invalid_enum", "invalid_value", "too_long"})
+REPLY_REASONS = frozenset({"refusal", "content_filter", "truncated", "empty", *DECISION_ERROR_CODES})
 # The provider says the model is unknown or gone (OpenAI 404 model_not_found, Gemini 404 "is not found",
 # a 400/410 for a shut-down model): said in one line with the current models of the price table.
 _MODEL_GONE = re.compile(r"model_not_found|does not exist|not found|no longer (available|supported)|deprecated|"
@@ -325,6 +337,11 @@ class ModelPilot:
             log.warning("no price for %s model %r (prices as of %s): its cost is reported as 0",
                         self.provider, self.model, pricing.PRICES_AS_OF)
 
+    @property
+    def validates_decisions(self) -> bool:
+        """Whether its decisions come back normalised and checked against the FSM (the episode then trusts them)."""
+        return self.validate
+
     def __repr__(self) -> str:  # never the key: the SDK client holds it, not us
         return f"{type(self).__name__}(model={self.model!r}, timeout={self.timeout:g})"
 
@@ -375,9 +392,6 @@ class ModelPilot:
     def _decision(self, reply: Reply, usage: Usage, pilot_input: PilotInput) -> Decision:
         import json
 
-        from vlnpilot.prompting import _MAX_TEXT as max_chars
-        from vlnpilot.prompting import DecisionError, normalize_decision, parse_decision, validate_decision
-
         raw = reply.text if reply.data is None else json.dumps(reply.data, ensure_ascii=False)
         who = f"{self.provider} model {self.model!r}"
 
@@ -395,41 +409,28 @@ class ModelPilot:
                        f"{reply.stop_detail}): raise max_output_tokens", "truncated")
         if raw is None or not raw.strip():
             raise fail(f"the {who} returned an empty reply ({reply.stop_detail or 'no content'})", "empty")
-        if len(raw) > max_chars:  # parse_decision searches only this far: say so, rather than "not JSON"
-            raise fail(f"the {who} reply is {len(raw)} characters long, over the {max_chars} a decision may "
-                       f"take (max_output_tokens is {self.max_output_tokens})", "too_long",
+        if len(raw) > MAX_REPLY_CHARS:  # parse_decision searches only this far: say so, rather than "not JSON"
+            raise fail(f"the {who} reply is {len(raw)} characters long, over the {MAX_REPLY_CHARS} a decision may "
+                       f"take (max_output_tokens is {self.max_output_tokens})", TOO_LONG,
                        f"your reply was {len(raw)} characters; answer with the short JSON object only")
         try:
             decision = parse_decision(raw)
         except DecisionError as exc:
-            reason = getattr(exc, "code", None) or decision_error_code(exc.reason)
-            raise fail(f"the {who} reply is not a valid decision: {exc.reason}", reason, exc.reason) from None
+            raise fail(f"the {who} reply is not a valid decision: {exc.reason}", exc.code, exc.reason) from None
         if self.validate:
             problem = validate_decision(decision, pilot_input.state, pilot_input.profile)
             if problem is not None:
                 raise fail(f"the {who} reply breaks the rules of state '{pilot_input.state}': {problem}",
-                           "invalid_enum", problem)
+                           INVALID_ENUM, problem)
             decision = normalize_decision(decision)
         return decision.model_copy(update={"raw_text": raw, "usage": usage, "model": self.model})
-
-
-def decision_error_code(reason: str) -> str:
-    """A short code for a DecisionError sentence of prompting.parse_decision."""
-    low = reason.lower()
-    if "door_position" in low and "not one of" in low:
-        return "invalid_enum"
-    if "lacks the field" in low or "missing or null" in low:
-        return "missing_field"
-    if "must be a string" in low or "must be text" in low:
-        return "invalid_value"
-    return "not_json"
 
 
 # ---------------------------------------------------------------- SDK errors
 
 def _httpx_errors(name: str) -> tuple[type[BaseException], ...]:
     out: list[type[BaseException]] = []
-    for module in ("httpx", "httpx2"):
+    for module in ("httpx", "httpx2"):  # google-genai (and openai, anthropic) use both: not dead
         try:
             mod = __import__(module)
         except ImportError:

@@ -1,74 +1,12 @@
-"""The Pilot protocol, its input and its Decision (the paper's output format), and the pilot registry."""
+"""The Pilot protocol, PilotError and the pilot registry (the input and answer types are `vlnpilot.decision`)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
-from typing import Any, ClassVar, Literal, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
-import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
-
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.errors import UnknownNameError, VLNPilotError
-from vlnpilot.fsm import State
-from vlnpilot.types import GroundTruth
-
-DoorPosition = Literal["left", "center", "right", "not_visible"]
-DOOR_POSITIONS: tuple[str, ...] = ("left", "center", "right", "not_visible")
-
-
-class Usage(BaseModel):
-    """Token usage of one model call as the API reports it, and its wall-clock latency."""
-
-    model_config = ConfigDict(frozen=True)
-    input_tokens: int = 0
-    cached_tokens: int = 0
-    output_tokens: int = 0
-    latency_s: float = 0.0
-    cost_usd: float = 0.0
-    priced: bool = True  # False when the model is missing from the price table (cost then reads 0)
-
-    def __add__(self, other: Usage) -> Usage:
-        sums = {k: getattr(self, k) + getattr(other, k) for k in Usage.model_fields if k != "priced"}
-        return Usage(**sums, priced=self.priced and other.priced)
-
-
-class Decision(BaseModel):
-    """One answer of the pilot, exactly the paper's output format plus metadata.
-
-    `movement` and `state` are kept as the model wrote them; the controller validates them against
-    the FSM table before anything moves.
-    """
-
-    model_config = ConfigDict(frozen=True)
-    room: str
-    movement: str
-    state: str
-    description: str = ""
-    door_position: DoorPosition = "not_visible"
-    # metadata (never sent to the model)
-    raw_text: str | None = Field(default=None, exclude=False)
-    usage: Usage = Field(default_factory=Usage)
-    model: str | None = None
-
-    def core(self) -> dict[str, str]:
-        """The five fields of the paper's output format."""
-        return {k: getattr(self, k) for k in ("room", "movement", "state", "description", "door_position")}
-
-
-@dataclass(frozen=True)
-class PilotInput:
-    """What a pilot sees at one step: the paper's five inputs plus controller feedback."""
-
-    image: np.ndarray = field(repr=False)  # front camera, HxWx3 uint8
-    query: str
-    topological_map: dict[str, Any]
-    state: State
-    previous_movement: str | None
-    step: int = 0
-    profile: str = "paper"  # FSM profile: which moves each state allows
-    feedback: tuple[str, ...] = ()  # validation errors of a re-ask, shield and oscillation notes
-    context: tuple[str, ...] = ()  # pilot context beyond the paper (vlnpilot.context): odometry, budget, memory
 
 
 class PilotError(VLNPilotError):
@@ -82,19 +20,16 @@ class PilotError(VLNPilotError):
 
 @runtime_checkable
 class Pilot(Protocol):
-    """Anything that turns a PilotInput into a Decision. `privileged` pilots get ground truth."""
+    """Anything that turns a PilotInput into a Decision. `privileged` pilots get ground truth.
+
+    A pilot whose `validates_decisions` is true returns decisions already normalised and allowed in
+    `pilot_input.state` (ModelPilot does, with `decision.validate_decision`); the episode checks every other's.
+    """
 
     name: str
     model: str | None
 
     def decide(self, pilot_input: PilotInput) -> Decision: ...
-
-
-class PrivilegedPilot(Pilot, Protocol):
-    privileged: ClassVar[bool]
-
-    def attach(self, ground_truth: GroundTruth) -> None:
-        """Receive the narrow ground-truth interface at the start of an episode."""
 
 
 PilotFactory = Callable[..., Pilot]

@@ -26,8 +26,8 @@ them). `bench` builds a pilot per episode, so with `files` its second episode is
 from __future__ import annotations
 
 import contextlib
+import io
 import json
-import os
 import re
 import tempfile
 import time
@@ -37,21 +37,16 @@ from typing import Any
 
 from PIL import Image
 
+from vlnpilot.decision import FIELDS, Decision, PilotInput, Usage, parse_decision
 from vlnpilot.errors import ConfigError
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
-from vlnpilot.prompting import FIELDS, build_prompt, parse_decision
+from vlnpilot.fileio import write_atomic
+from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.prompting import build_prompt
 
 # The files a run writes (NNN.png, NNN.prompt.md, NNN.answer.json, their temp files, and the fixed names):
 # they decide whether DIR already holds another run, and they are the only files `overwrite` deletes.
 _CALL_FILE_RE = re.compile(r"^\.?\d{3,}\.(png|prompt\.md|answer\.json)(\.tmp)?$")
 _FIXED_FILES = ("latest.txt", "done.txt", "system.md")
-
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """Write via a hidden temp file and os.replace, so that a reader never sees a partial file."""
-    tmp = path.with_name(f".{path.name}.tmp")
-    tmp.write_bytes(data)
-    os.replace(tmp, path)
 
 
 def run_files(directory: Path) -> list[Path]:
@@ -155,9 +150,9 @@ class FilesPilot:
 
     def _write_call(self, call: str, pilot_input: PilotInput, user_text: str, first: bool) -> None:
         image = self.directory / f"{call}.png"
-        tmp = image.with_name(f".{image.name}.tmp")
-        Image.fromarray(pilot_input.image).save(tmp, format="PNG")
-        os.replace(tmp, image)
+        png = io.BytesIO()
+        Image.fromarray(pilot_input.image).save(png, format="PNG")
+        write_atomic(image, png.getvalue())
         text = user_text.rstrip() + "\n\n---\n\n" + _answer_instructions(call, first)
         write_atomic(self.directory / f"{call}.prompt.md", text.encode("utf-8"))  # last: the call is complete
         write_atomic(self.directory / "latest.txt", f"{call}\n".encode())

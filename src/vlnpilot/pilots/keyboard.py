@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from vlnpilot.pilots.base import Decision, Pilot, PilotInput
+from vlnpilot.decision import Decision, PilotInput
+from vlnpilot.pilots.base import Pilot
 
 HUMAN = "human"  # the `model` of a decision a person made
 

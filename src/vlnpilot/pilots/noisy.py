@@ -25,9 +25,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import State
-from vlnpilot.pilots.base import Decision, PilotInput, register_pilot
+from vlnpilot.pilots.base import register_pilot
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.safety import ASSIST_NOTE, GUARD_NOTE, SHIELD_NOTE
 from vlnpilot.scene.model import Door

@@ -13,9 +13,10 @@ import math
 from typing import ClassVar
 
 from vlnpilot.commands import COMMANDS, Kind
+from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State, state_spec
-from vlnpilot.pilots.base import Decision, PilotInput, register_pilot
+from vlnpilot.pilots.base import register_pilot
 from vlnpilot.scene.model import Door
 from vlnpilot.tasks import SuccessConfig, Task, parse_query
 from vlnpilot.tello_spec import horizontal_fov_deg

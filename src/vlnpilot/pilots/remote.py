@@ -15,6 +15,7 @@ from typing import Any
 
 import httpx
 
+from vlnpilot.decision import Decision, PilotInput, Usage
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots._common import (
     REPLY_REASONS,
@@ -28,7 +29,7 @@ from vlnpilot.pilots._common import (
     timeout_error,
 )
 from vlnpilot.pilots._gate import CallCancelled, CallGate
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
+from vlnpilot.pilots.base import PilotError, register_pilot
 
 URL_ENV = "VLN_PILOT_URL"
 TOKEN_ENV = "VLN_PILOT_TOKEN"

@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.context import context_name
+from vlnpilot.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
 from vlnpilot.errors import ConfigError
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, register_pilot
-from vlnpilot.prompting import DecisionError, parse_decision
+from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.record import load_run, load_trial
 
 _MALFORMED = "malformed answer: "
@@ -126,7 +126,7 @@ class ReplayPilot:
         if reason.startswith(_MALFORMED):
             raise DecisionError(reason[len(_MALFORMED):])
         if reason.startswith(_INVALID_PREFIXES):  # an invalid decision recorded without its raw text
-            raise DecisionError(reason)
+            raise DecisionError(reason, code=INVALID_ENUM)
         kind, _, message = reason.partition(": ")
         raise PilotError(message or reason, fatal=False, reason=kind if message else "pilot_error")
 

@@ -19,9 +19,10 @@ import weakref
 from pathlib import Path
 from typing import IO, Any
 
+from vlnpilot.decision import Decision, PilotInput, Usage, parse_decision
 from vlnpilot.errors import ConfigError
-from vlnpilot.pilots.base import Decision, PilotError, PilotInput, Usage, register_pilot
-from vlnpilot.prompting import build_prompt, parse_decision
+from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.prompting import build_prompt
 
 RULE = "=" * 100
 

@@ -23,7 +23,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, Ellipse, FancyArrow, Patch, Polygon  # noqa: E402
 
 from vlnpilot.errors import UnknownNameError  # noqa: E402
-from vlnpilot.fsm import State
+from vlnpilot.fsm import ASKED_STATES
 from vlnpilot.scene.model import EXTERIOR, Door, Room, Scene, Solid  # noqa: E402
 
 WALL_COLOR = "0.35"
@@ -38,8 +38,7 @@ TRAJECTORY_COLOR = "0.15"
 _PALETTE = ("tab:blue", "tab:orange", "tab:purple", "tab:cyan", "tab:brown", "tab:pink", "tab:olive",
             "tab:gray", "tab:green", "tab:red")
 # One fixed colour per FSM state, so that a state looks the same in every plan, report and video.
-STATE_COLORS: dict[str, str] = {s.value: _PALETTE[i % len(_PALETTE)] for i, s in enumerate(
-    s for s in State if s not in (State.START, State.FINAL))}
+STATE_COLORS: dict[str, str] = {s.value: _PALETTE[i % len(_PALETTE)] for i, s in enumerate(ASKED_STATES)}
 
 XY = tuple[float, float]
 

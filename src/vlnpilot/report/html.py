@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.fileio import write_atomic
 from vlnpilot.report.timeline import Entry, Episode, load_episode, load_scene_or_none
 
 REPORT = "report.html"
@@ -76,16 +77,6 @@ def _image_size(path: Path) -> tuple[int, int] | None:
             return im.size
     except OSError:
         return None
-
-
-def _room_name(scene: Any, room_id: str | None) -> str:
-    if not room_id:
-        return "–"
-    if scene is not None:
-        found = scene.find_room(room_id)
-        if found is not None:
-            return found.name
-    return str(room_id)
 
 
 def _room_chip(scene: Any, room_id: str | None) -> str:
@@ -636,10 +627,7 @@ def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) 
         (run_dir / FLOORPLAN).write_bytes(plan.png())
     page = render_episode_report(ep, plan_file, plan)
     path = Path(out) if out is not None else run_dir / REPORT
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, page)
 
 
 # -- the benchmark page ---------------------------------------------------------------------------------
@@ -933,7 +921,4 @@ def write_bench_report(bench_dir: str | Path, *, episode_reports: bool = True) -
     plot_files = bench_plots(data, data.bench_dir / PLOTS) if data.records else []
     page = render_bench_report(data, plot_files)
     path = data.bench_dir / REPORT
-    tmp = path.with_suffix(".html.tmp")
-    tmp.write_text(page, encoding="utf-8")
-    os.replace(tmp, path)
-    return path
+    return write_atomic(path, page)

@@ -185,9 +185,5 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
     return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene)
 
 
-def yaw_of(pose: dict[str, float] | None) -> float:
-    return float(pose.get("yaw_deg", 0.0)) if pose else 0.0
-
-
 def finite(value: Any) -> bool:
     return isinstance(value, int | float) and math.isfinite(value)

@@ -34,10 +34,11 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from vlnpilot.commands import COMMANDS, get_command
+from vlnpilot.decision import DecisionFields, PilotInput, Usage
 from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
-from vlnpilot.fsm import PROFILES, State, parse_state
+from vlnpilot.fsm import ASKED_STATES, PROFILES, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
-from vlnpilot.pilots.base import DOOR_POSITIONS, Pilot, PilotError, PilotInput, Usage, make_pilot
+from vlnpilot.pilots.base import Pilot, PilotError, make_pilot
 from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, refuse_privileged
 
 log = logging.getLogger(__name__)
@@ -60,8 +61,7 @@ def _tiny_jpeg_b64() -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-_ASKED_STATES = tuple(s.value for s in State if s not in (State.START, State.FINAL))
-AskedState = Literal[_ASKED_STATES]  # type: ignore[valid-type]
+AskedState = Literal[tuple(s.value for s in ASKED_STATES)]  # type: ignore[valid-type]
 CommandCode = Literal[tuple(COMMANDS)]  # type: ignore[valid-type]
 Profile = Literal[PROFILES]  # type: ignore[valid-type]
 
@@ -97,14 +97,9 @@ class DecideRequest(BaseModel):
                               max_length=200)
 
 
-class DecideResponse(BaseModel):
+class DecideResponse(DecisionFields):
     """The pilot's Decision: the paper's five fields, plus usage and the model that answered."""
 
-    room: str
-    movement: str
-    state: str
-    description: str = ""
-    door_position: str = Field(default="not_visible", json_schema_extra={"enum": list(DOOR_POSITIONS)})
     usage: Usage
     model: str | None = None
     raw_text: str | None = None
@@ -242,8 +237,6 @@ _OBJECT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
 
 
 def _pilot_input(req: DecideRequest) -> PilotInput:
-    from vlnpilot.prompting import ASKED_STATES
-
     try:
         state = parse_state(req.state)
     except UnknownNameError as exc:
