@@ -319,3 +319,20 @@ def test_shortened_commands_stay_in_the_table():
     assert [c.code for c in shorter_commands(get_command("A3"))] == ["A2", "A1"]
     assert [c.code for c in shorter_commands(get_command("B3"))] == ["B2", "B1"]
     assert shorter_commands(get_command("D1")) == []
+
+
+@pytest.mark.parametrize(("spawn", "query"), [("living_room", "Go to the bathroom"), ("bathroom", "Go to the bedroom")])
+def test_safety_feedback_never_names_the_scene(geo_sim, spawn, query):
+    """What the pilot is told about an intervention must not leak ground truth that the camera cannot show: no room,
+    door or solid name (a real pilot read the room's name off 'wall_living_room')."""
+    names = {r.id for r in geo_sim.scene.rooms} | {d.id for d in geo_sim.scene.doors} | \
+        {s.name for s in geo_sim.scene.solids}
+    lines: list[str] = []
+    for seed in range(4):
+        pilot = make_pilot("noisy-oracle", p_offset=1.0, p_strict=1.0, p_early=0.0)
+        task = parse_query(query, geo_sim.scene)
+        run_episode(geo_sim, pilot, task, EpisodeConfig(seed=seed, shield="geometry"), spawn=spawn,
+                    on_step=lambda rec: lines.extend(rec["safety_feedback"]))
+    assert any(line.startswith(("Safety shield", "Door assist")) for line in lines)  # the shield did speak
+    leaked = [(line, n) for line in lines for n in names if n in line]
+    assert not leaked, leaked[:3]

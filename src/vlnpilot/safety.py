@@ -164,6 +164,16 @@ class SafetyVerdict:
     feedback: tuple[str, ...] = ()
 
 
+def obstacle_kind(geom: str) -> str:
+    """What a pilot may be told about an obstacle: its kind, never the scene's name for it (names such as
+    `wall_living_room_e_3` or `door_bedroom_bathroom_frame_left` would tell the room, which the camera must)."""
+    for word, kind in (("leaf", "an open door leaf"), ("frame", "a door frame"), ("window", "a window"),
+                       ("wall", "a wall"), ("floor", "the floor"), ("ceiling", "the ceiling")):
+        if word in geom:
+            return kind
+    return "an object"
+
+
 # -- geometry helpers -------------------------------------------------------------------------------------------
 def _fractions(motion: Motion, config: SafetyConfig, substeps: Callable[[Motion], int] | None) -> list[float]:
     """Sample fractions of a motion: at least as fine as the config, and a superset of the simulator's poses."""
@@ -247,8 +257,8 @@ class GeometryShield(Shield):
             hit = self._clearance_at(motion.apply(pose, frac), limit)
             if hit is not None and hit[0] < limit:
                 dist, world, part = hit
-                return (f"{part.replace('_', ' ')} would come {max(dist, 0.0) * 100:.0f} cm from {world} "
-                        f"(keeps {limit * 100:.0f} cm)")
+                return (f"{part.replace('_', ' ')} would come {max(dist, 0.0) * 100:.0f} cm from "
+                        f"{obstacle_kind(world)} (keeps {limit * 100:.0f} cm)")
         return None
 
 
@@ -461,7 +471,7 @@ class DoorAssist:
         lat_drone = lateral * sign  # + = the drone is left of the centre line
         clear = self.clearance(door)
         side = "left" if lat_drone > 0 else "right"
-        what = (f"the drone is {abs(lat_drone) * 100:.0f} cm {side} of the centre line of {door.id}, which "
+        what = (f"the drone is {abs(lat_drone) * 100:.0f} cm {side} of the centre line of the doorway, which "
                 f"leaves ±{clear * 100:.0f} cm (opening {door.width * 100:.0f} cm, drone {tello_spec.WIDTH * 100:.1f} "
                 f"cm wide, margin {self.config.margin_m * 100:.0f} cm): {command.code} would bring a propeller into "
                 f"the door frame")
@@ -594,7 +604,7 @@ class SafetyLayer:
             band = cfg.oscillation.accept_heading_deg
             if state is State.ORIENTED_TOWARDS_DOOR and al is not None and al.fits and abs(al.heading_err_deg) <= band:
                 cmd, nxt = COMMANDS["A1"], State.GO_THROUGH_DOOR
-                why = (f"accepted the alignment with {al.door.id} ({abs(al.lateral_m) * 100:.0f} cm off the centre "
+                why = (f"accepted the alignment with the doorway ({abs(al.lateral_m) * 100:.0f} cm off the centre "
                        f"line, within ±{al.clearance_m * 100:.0f} cm; heading {abs(al.heading_err_deg):.0f}° off, "
                        f"within ±{band:.0f}°) and committed to the crossing: A1, state {nxt.value}")
             else:
@@ -621,7 +631,7 @@ class SafetyLayer:
             if side is not None and self.shield.hazard(pose, side[0].motion()) is None:
                 fix, al = side
                 text = (f"{cmd.code} is blocked ({why}); the drone is {abs(al.lateral_m) * 100:.0f} cm off the centre "
-                        f"line of {al.door.id}, so it moves {'right' if al.lateral_m > 0 else 'left'} 10 cm instead")
+                        f"line of the doorway, so it moves {'right' if al.lateral_m > 0 else 'left'} 10 cm instead")
                 found.append(Intervention(step, "door_assist", cmd.code, fix.code, text))
                 notes.append(f"{ASSIST_NOTE}: {text}.")
                 cmd = fix
