@@ -35,7 +35,9 @@ def summary_table(sets: dict[str, list[dict]]) -> str:
         count = {o: sum(t["outcome"] == o for t in trials) for o in OUTCOMES}
         lo, hi = wilson_interval(count["success"], n)
         mean = sum(t["steps"] for t in trials) / n
-        lines.append(f"| {LABELS.get(name, name)} | {trials[0]['context']} | {trials[0]['scene']} | {n} | "
+        scenes = sorted({t["scene"] for t in trials})
+        scene = scenes[0] if len(scenes) == 1 else ", ".join(scenes)
+        lines.append(f"| {LABELS.get(name, name)} | {trials[0]['context']} | {scene} | {n} | "
                      f"{count['success']}/{n} = {count['success'] / n:.0%} ({lo:.0%}-{hi:.0%}) | "
                      f"{count['false_success']} | {count['collision']} | {count['max_steps']} | {mean:.1f} |")
     return "\n".join(lines)
