@@ -6,25 +6,15 @@ import signal
 import socket
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 
+from polling import wait_for
 from tello_support import emulator_config, free_udp_port, loopback_only, rig  # noqa: F401  (loopback_only: autouse guard)
 from vlnpilot.errors import ConfigError
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import OUT_OF_RANGE, EmulatorConfig, TelloEmulator
-
-
-def wait_for(predicate, timeout: float = 10.0) -> bool:
-    """Poll until `predicate()` holds (a failure bound, never a timing assertion)."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 def test_the_loopback_guard_stops_a_packet_to_another_address() -> None:

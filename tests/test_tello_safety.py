@@ -7,12 +7,12 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from polling import wait_for
 from tello_support import LOCAL_PORT, STATE_PORT, emulator_config, free_udp_port, loopback_only, rig  # noqa: F401
 from vlnpilot import cli
 from vlnpilot.decision import Decision, PilotInput
@@ -26,16 +26,6 @@ from vlnpilot.robots.tello_config import load_tello_config
 from vlnpilot.robots.tello_link import RobotError
 from vlnpilot.sim import Simulator
 from vlnpilot.tasks import parse_query
-
-
-def wait_for(predicate, timeout: float = 10.0) -> bool:
-    """Poll until `predicate()` holds (a failure bound, never a timing assertion)."""
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.01)
-    return predicate()
 
 
 def test_first_ctrl_c_lands_and_the_second_stops_the_motors(tmp_path: Path) -> None:
