@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import threading
-import time
 
 import pytest
 
@@ -133,7 +132,7 @@ def test_oracle_callback_and_delay_with_concurrent_clients():
         answer["description"] = f"oracle in {request.current_state}"
         return answer
 
-    with FakeOpenAI(oracle=oracle, delay=0.3) as fake:
+    with FakeOpenAI(oracle=oracle, delay=0.3, rendezvous=8) as fake:  # 8 answers wait until 8 calls overlap
         pilot = make_pilot("openai", base_url=fake.base_url, api_key=KEY)
         results = []
 
@@ -141,15 +140,12 @@ def test_oracle_callback_and_delay_with_concurrent_clients():
             results.append(pilot.decide(sample_input(State.RECOGNIZE_ROOM)))
 
         threads = [threading.Thread(target=run) for _ in range(8)]
-        t0 = time.monotonic()
         for t in threads:
             t.start()
         for t in threads:
             t.join()
-        elapsed = time.monotonic() - t0
-    assert len(results) == 8 and len(seen) == 8
+    assert len(results) == 8 and len(seen) == 8  # a serial client would have broken the rendezvous (a 500)
     assert all(d.movement == "C3" and d.description == "oracle in Recognize Room" for d in results)
-    assert elapsed < 8 * 0.3  # handled concurrently
     assert all(d.usage.latency_s >= 0.29 for d in results)
 
 

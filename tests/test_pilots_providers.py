@@ -264,8 +264,8 @@ def test_price_file_overrides_the_table(fake, pilot_factory, tmp_path):
 
 
 def test_concurrent_decisions(fake, pilot_factory):
-    fake.delay = 0.4
-    pilot = pilot_factory()
+    fake._rendezvous = threading.Barrier(6)  # each answer waits until all 6 calls are in flight together
+    pilot = pilot_factory(max_retries=0)  # a broken rendezvous must fail the test, not be retried away
     results: list[Decision] = []
     errors: list[BaseException] = []
 
@@ -276,10 +276,8 @@ def test_concurrent_decisions(fake, pilot_factory):
             errors.append(exc)
 
     threads = [threading.Thread(target=run) for _ in range(6)]
-    t0 = time.monotonic()
     for t in threads:
         t.start()
     for t in threads:
         t.join()
-    assert not errors and len(results) == 6
-    assert time.monotonic() - t0 < 6 * 0.4  # the calls overlapped
+    assert not errors and len(results) == 6  # serial calls would have broken the rendezvous (a 500 each)

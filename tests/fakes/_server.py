@@ -9,7 +9,8 @@ protocol, so the official SDKs are exercised for real. A fake answers, in this o
 
 Actions: decision, text, prose, not_json, missing_field, wrong_enum, refusal, truncated, content_filter,
 rate_limit, server_error, status, bad_key, hang, bad_body, reject_schema (OpenAI: 400 on json_schema).
-`delay` (seconds) is slept before every normal answer; the server is threaded, so concurrent clients overlap.
+`delay` (seconds) is slept before every normal answer; the server is threaded, so concurrent clients overlap;
+`rendezvous=N` makes normal answers wait until N requests are in flight together.
 """
 
 from __future__ import annotations
@@ -159,10 +160,13 @@ class FakeServer:
     provider = "fake"
 
     def __init__(self, *, decision: dict | None = None, oracle: Oracle | None = None, delay: float = 0.0,
-                 cached_tokens: int = 0, host: str = "127.0.0.1", port: int = 0):
+                 cached_tokens: int = 0, host: str = "127.0.0.1", port: int = 0, rendezvous: int = 0):
         self.decision = decision
         self.oracle = oracle
         self.delay = delay
+        # With rendezvous=N, normal answers wait until N requests are in flight at once (a 500 after 10 s
+        # otherwise): a test of concurrent clients then needs no wall-clock bound.
+        self._rendezvous = threading.Barrier(rendezvous) if rendezvous else None
         self.cached_tokens = cached_tokens
         self.requests: list[RecordedRequest] = []
         self._script: deque[Action] = deque()
@@ -330,6 +334,11 @@ class FakeServer:
             return status, body, headers
         if kind == "bad_body":
             return 200, b'{"id": "broken", "choices": [ this is not json', headers
+        if self._rendezvous is not None:
+            try:
+                self._rendezvous.wait(timeout=10)
+            except threading.BrokenBarrierError:
+                return 500, self._error_body(500, "the requests never overlapped", "server_error"), headers
         if self.delay > 0 or p.get("delay"):
             time.sleep(p.get("delay", self.delay))
         if kind == "text":
