@@ -37,11 +37,13 @@ def test_round_trip_through_a_real_server(served, monkeypatch):
     monkeypatch.setenv("VLN_PILOT_TOKEN", TOKEN)
     pilot = make_pilot("remote")
     assert isinstance(pilot, RemotePilot) and pilot.url == url
-    decision = pilot.decide(sample_input(State.REACH_OBJECT, feedback=("too far left",)))
+    context = ("Odometry in the current state (it restarts at every state change): forward 0.30 m.",)
+    decision = pilot.decide(sample_input(State.REACH_OBJECT, feedback=("too far left",), context=context))
     assert decision.movement == "A1" and decision.model == "openai:gpt-4.1"
     assert decision.usage.input_tokens == 10 and decision.usage.latency_s > 0
     seen = pilots["openai:gpt-4.1"].inputs[-1]
     assert seen.state is State.REACH_OBJECT and seen.feedback == ("too far left",)
+    assert seen.context == context  # the plus context reaches a pilot behind the server
     assert seen.image.shape == (48, 64, 3)
     assert TOKEN not in repr(pilot)
 

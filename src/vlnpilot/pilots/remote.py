@@ -113,6 +113,7 @@ class RemotePilot:
             "previous_movement": pilot_input.previous_movement,
             "profile": pilot_input.profile,
             "feedback": list(pilot_input.feedback),
+            "context": list(pilot_input.context),
             "step": pilot_input.step,
         }
         if self.model:

@@ -92,6 +92,8 @@ class DecideRequest(BaseModel):
     profile: Profile = Field(default="paper", description="FSM profile: which moves each state allows")
     feedback: list[str] = Field(default_factory=list, description="controller feedback lines for a re-ask",
                                 max_length=20)
+    context: list[str] = Field(default_factory=list, description="pilot context lines (odometry, budget, memory)",
+                               max_length=20)
     step: WholeNumber = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
     pilot: str | None = Field(default=None, description="pilot SPEC (name or name:model); default: the server's",
                               max_length=200)
@@ -257,7 +259,8 @@ def _pilot_input(req: DecideRequest) -> PilotInput:
     image = decode_image(req.image)
     return PilotInput(image=image, query=req.query, topological_map=req.topological_map, state=state,
                       previous_movement=previous, step=req.step, profile=req.profile,
-                      feedback=tuple(str(f)[:500] for f in req.feedback))
+                      feedback=tuple(str(f)[:500] for f in req.feedback),
+                      context=tuple(str(c)[:500] for c in req.context))
 
 
 # ------------------------------------------------------------------------------------------ the app
