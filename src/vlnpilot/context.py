@@ -101,10 +101,9 @@ class PilotContext:
 
     def __init__(self, config: ContextConfig, max_steps: int):
         self.config, self.max_steps = config, max_steps
-        self._state: State | None = None
         self._in_state = Travel()
         self._since_door: Travel | None = None  # None until the first Go Through Door
-        self._memory: deque[str] = deque(maxlen=max(config.memory, 1))
+        self._memory: deque[str] = deque(maxlen=config.memory)
 
     def update(self, step: int, state: State, decision: Any, executed: Command, next_state: State) -> None:
         """After a step: `executed` was flown in `state`, and the FSM moves on to `next_state`."""
@@ -116,8 +115,8 @@ class PilotContext:
             if next_state is State.GO_THROUGH_DOOR:  # the crossing began with this step's move
                 self._since_door = Travel().add(executed)
         if decision is not None and self.config.memory:
-            proposed = "" if decision.movement == executed.code else f" (executed {executed.code})"
-            self._memory.append(f"step {step}: in {state.value}, you chose {decision.movement}{proposed} -> "
+            changed = "" if decision.movement == executed.code else f" (executed {executed.code})"
+            self._memory.append(f"step {step}: in {state.value}, you chose {decision.movement}{changed} -> "
                                 f"{next_state.value}; room {decision.room}; you saw: {_short(decision.description)}")
 
     def lines(self, step: int) -> tuple[str, ...]:
@@ -136,7 +135,7 @@ class PilotContext:
                            f"{self._since_door.text()}.")
         if c.memory and self._memory:
             out.append("Your last decisions, oldest first:")
-            out += [f"  {m}" for m in list(self._memory)[-c.memory:]]
+            out += [f"  {m}" for m in self._memory]
         return tuple(out)
 
 
