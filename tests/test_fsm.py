@@ -175,3 +175,20 @@ def test_asked_states_are_defined_once_and_read_by_prompts_server_and_plans() ->
     assert list(STATE_COLORS) == [s.value for s in ASKED_STATES]
     for state in ASKED_STATES:
         assert render_state_prompt(state)
+
+
+def test_hover_goes_with_a_final_state_and_a_next_state_move_is_explained() -> None:
+    """Real pilots answered E with Stay on Room from Recognize Room (now accepted), and A2 when leaving Go Through
+    Door (still rejected, with the reason a pilot needs)."""
+    from vlnpilot.decision import Decision, validate_decision
+
+    def check(state: State, move: str, nxt: State) -> str | None:
+        d = Decision(room="bedroom", movement=move, state=nxt.value, description="", door_position="not_visible")
+        return validate_decision(d, state)
+
+    assert check(State.RECOGNIZE_ROOM, "E", State.STAY_ON_ROOM) is None
+    assert "not allowed" in check(State.RECOGNIZE_ROOM, "E", State.SEARCH_OPEN_DOOR)  # E only with a final state
+    why = check(State.GO_THROUGH_DOOR, "A2", State.POSITION_IN_CENTER)
+    assert "flown now, in 'Go Through Door'" in why and "apply from the next step" in why
+    assert state_spec(State.RECOGNIZE_ROOM).answer_moves[-1] == "E"
+    assert "E" not in state_spec(State.SEARCH_OBJECT).answer_moves  # no final state reachable from there
