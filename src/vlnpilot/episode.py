@@ -130,18 +130,13 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
                 judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
-    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given.
-
-    Without ground truth (a real robot) a declared final state is a success only as declared, unless
-    `judge_outcome` (the operator) confirms or rejects it.
-    """
+    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given. Without ground
+    truth (a real robot) a final state is a success as declared, unless `judge_outcome` (the operator) rules."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
-    safety, measures, recording = _start(env, pilot, task, config, obs, recorder, on_step, spawn, pilot_spec)
-    asker = PilotAsker(pilot, task, config, env.scene.topological_map())
-    state, steps, failed_streak = State.RECOGNIZE_ROOM, 0, 0  # Start: the controller takes off, then Recognize Room
-    end = _End("max_steps", f"no final state within {config.max_steps} steps")
+    safety, measures, recording, asker = _start(env, pilot, task, config, obs, recorder, on_step, spawn, pilot_spec)
+    state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
     for step in range(1, config.max_steps + 1):
         gate = control.before_step(step)
         if gate.abort is not None:
@@ -149,28 +144,23 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             break
         steps = step
         answer = asker.ask(step, state, obs, person=gate.pilot)  # observe, ask, validate
-        stop = _not_to_execute(control, answer)
-        if stop is not None:  # recorded, never executed
-            measures.update(StepFacts(tuple(answer.usages), False, None, obs.pose, obs.pose))
-            recording.step(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
-                                      confirmation=answer.confirmation))
-            end = stop
+        end = _not_to_execute(control, answer)
+        if end is not None:  # recorded, never executed
+            _unexecuted(step, state, answer, obs, measures, recording)
             break
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
         pose_before, (obs, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
-        measures.update(StepFacts(tuple(answer.usages), answer.decision is not None, verdict.command,
-                                  pose_before, obs.pose))
+        measures.update(StepFacts(tuple(answer.usages), answer.valid, verdict.command, pose_before, obs.pose))
         recording.step(_flown(step, state, answer, verdict, pose_before, obs, gt, measures, config.profile))
-        asker.flown(step, state, answer.decision, verdict.command, verdict.next_state, verdict.feedback)
-        failed_streak = 0 if answer.decision is not None else failed_streak + 1
-        stop = _stopped(halt, obs, answer, failed_streak, config.max_failed_steps)
-        if stop is None:  # the FSM moves on; a final state ends the episode, judged
+        asker.flown(step, state, answer, verdict.command, verdict.next_state, verdict.feedback)
+        end = _stopped(halt, obs, answer, asker.failed_streak, config.max_failed_steps)
+        if end is None:  # the FSM moves on; a final state ends the episode, judged
             state = verdict.next_state
-            stop = _judged(task, state, gt, config, judge_outcome) if state in FINAL_STATES else None
-        if stop is not None:
-            end = stop
+            end = _judged(task, state, gt, config, judge_outcome) if state in FINAL_STATES else None
+        if end is not None:
             break
     asker.close()
+    end = end or _End("max_steps", f"no final state within {config.max_steps} steps")
     result = _result(end, steps, state, gt, measures.values(EpisodeEnd(end.outcome, safety)), t_start)
     recording.finish(result, obs.pose, safety)
     _tell_pilot_the_outcome(pilot, result)
@@ -179,7 +169,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
 
 def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, obs: Observation,
            recorder: Recorder | None, on_step: StepCallback | None, spawn: str | Spawn | None,
-           pilot_spec: str | None) -> tuple[SafetyLayer, Measures, EpisodeRecording]:
+           pilot_spec: str | None) -> tuple[SafetyLayer, Measures, EpisodeRecording, PilotAsker]:
     """Before the first step: seed the pilot, reset the safety layer and the measures, write the run's header."""
     _reseed(pilot, config.seed)
     safety = make_safety(config.shield, env, env.scene, config.safety)
@@ -189,7 +179,15 @@ def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, ob
     recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
     _tell_pilot_the_episode(pilot, env.scene, config)
-    return safety, measures, recording
+    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
+
+
+def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
+                recording: EpisodeRecording) -> None:
+    """A step that ends the episode before anything is executed still costs its calls and is recorded."""
+    measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose))
+    recording.step(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
+                              confirmation=answer.confirmation))
 
 
 def _not_to_execute(control: LoopControl, answer: StepAnswer) -> _End | None:

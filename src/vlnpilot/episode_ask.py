@@ -105,6 +105,10 @@ class StepAnswer:
     fatal: bool = False
     usages: list[Usage] = field(default_factory=list)
 
+    @property
+    def valid(self) -> bool:
+        return self.decision is not None
+
 
 def needs_confirmation(context: ContextConfig, decision: Decision | None, asked: dict[str, Any] | None) -> bool:
     """A valid answer that declares a final state, not yet confirmed, with the confirm_final context item on."""
@@ -122,6 +126,7 @@ class PilotAsker:
         self.context = PilotContext(config.context, config.max_steps)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
+        self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)
 
     def ask(self, step: int, state: State, obs: Observation, person: Pilot | None = None) -> StepAnswer:
         """Ask until a valid decision, a fatal or transient failure, or `max_reasks` rejected answers."""
@@ -162,12 +167,13 @@ class PilotAsker:
             feedback = [*self.notes, f"Your previous answer was rejected: {why}"]
         return out
 
-    def flown(self, step: int, state: State, decision: Decision | None, command: Command, next_state: State,
+    def flown(self, step: int, state: State, answer: StepAnswer, command: Command, next_state: State,
               notes: tuple[str, ...]) -> None:
         """After a step was executed: what the next prompt tells the pilot about it."""
-        self.context.update(step, state, decision, command, next_state)
+        self.context.update(step, state, answer.decision, command, next_state)
         self.previous = command.code
         self.notes = notes
+        self.failed_streak = 0 if answer.valid else self.failed_streak + 1
 
     def close(self) -> None:
         self.deadline.close()
