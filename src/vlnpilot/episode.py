@@ -222,7 +222,8 @@ def _execute(env: Environment, safety: SafetyLayer, command: Command,
 
 def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, pose_before: Pose,
            obs: Observation, gt: GroundTruth | None, measures: Measures, profile: str) -> StepRecord:
-    override = override_reason(state, profile, verdict.command, answer.decision is None, verdict.interventions,
+    """The record of an executed step; `override` says why a command outside the state's moves ran."""
+    override = override_reason(state, profile, verdict.command, not answer.valid, verdict.interventions,
                                verdict.next_state)
     return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, verdict.command,
                       verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
@@ -236,7 +237,7 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
         return _End("halted", str(halt))
     if obs.collided:
         return _End("collision", f"touched {obs.contact}", contact=obs.contact)
-    if answer.decision is None and failed_streak >= max_failed_steps:
+    if not answer.valid and failed_streak >= max_failed_steps:
         return _End("pilot_error", f"no valid decision in {failed_streak} consecutive steps")
     return None
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 from vlnpilot.commands import Command
@@ -47,7 +47,7 @@ class StepRecord:
     oscillation: bool = False
     verdict: SafetyVerdict | None = None
     override: str | None = None  # why an executed command outside the state's allowed moves ran
-    confirmation: dict[str, Any] | None = field(default=None)
+    confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
 
     def to_dict(self) -> dict[str, Any]:
         d, obs, verdict = self.decision, self.obs, self.verdict
