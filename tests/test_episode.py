@@ -221,7 +221,7 @@ def test_invalid_answer_is_reasked_with_the_reason_then_executed_when_valid(geo:
 
 def test_a_decision_is_validated_once(geo: Simulator, monkeypatch: pytest.MonkeyPatch) -> None:
     """A pilot that validates its own decisions (ModelPilot) is not validated again; any other pilot is."""
-    import vlnpilot.episode as episode
+    import vlnpilot.episode_ask as episode_ask
 
     seen: list[str] = []
 
@@ -229,7 +229,7 @@ def test_a_decision_is_validated_once(geo: Simulator, monkeypatch: pytest.Monkey
         seen.append(decision.movement)
         return None
 
-    monkeypatch.setattr(episode, "validate_decision", spy)
+    monkeypatch.setattr(episode_ask, "validate_decision", spy)
     query, config = parse_query("Go to the bathroom", geo.scene), EpisodeConfig(max_steps=2)
     run_episode(geo, ScriptedPilot([], default=answer("C1", "Recognize Room")), query, config, spawn="bedroom")
     assert seen == ["C1", "C1"]

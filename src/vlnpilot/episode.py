@@ -1,10 +1,10 @@
 """One closed-loop episode: the paper's Python controller.
 
-Each step: observe, ask the pilot, validate the decision against the FSM (is the movement allowed in this
-state? is the transition allowed?), execute, update the FSM, check termination. An invalid decision is
-never executed: the pilot is re-asked with the validation error (at most `max_reasks` times; a transient
-provider failure, already retried by the SDK, is not re-asked and not told to the model), then the
-drone hovers (E) and the step counts an invalid decision.
+Each step, in the shape of dm_control's rl/control.py: observe, ask the pilot and validate its decision
+against the FSM (is the movement allowed in this state? is the transition allowed?), filter it through the
+safety layer, execute, measure, record, update the FSM, check termination. An invalid decision is never
+executed: the pilot is re-asked with the validation error (`episode_ask`), then the drone hovers (E) and the
+step counts an invalid decision. The measures live in `episode_measures`, the records in `episode_record`.
 
 Between the validated decision and the drone sits the safety layer (`vlnpilot.safety`, `EpisodeConfig.shield`):
 an oscillation guard, a door-crossing assist and a shield may change the command (and, when the guard commits to
@@ -18,34 +18,26 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
-from vlnpilot.context import ContextConfig, PilotContext, confirmation_note, context_name, context_preset
-from vlnpilot.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
-from vlnpilot.environment import Environment, capabilities_of
+from vlnpilot.context import ContextConfig, context_preset
+from vlnpilot.environment import Environment
+from vlnpilot.episode_ask import PilotAsker, StepAnswer
+from vlnpilot.episode_measures import EpisodeEnd, EpisodeResult, EpisodeStart, Measures, StepFacts
+from vlnpilot.episode_record import EpisodeRecording, StepCallback, StepRecord
 from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
 from vlnpilot.overrides import override_reason
-from vlnpilot.pilots._common import TRANSIENT_REASONS
-from vlnpilot.pilots._gate import call_in_daemon_thread
-from vlnpilot.pilots.base import Pilot, PilotError
-from vlnpilot.pilots.keyboard import HUMAN
-from vlnpilot.prompting import prompt_hash
-from vlnpilot.record import Recorder, git_sha, package_versions
-from vlnpilot.safety import (
-    OVERLAYS,
-    SHIELDS,
-    SafetyConfig,
-    SafetyLayer,
-    SafetyVerdict,
-    draw_corridor,
-    make_safety,
-)
+from vlnpilot.pilots.base import Pilot
+from vlnpilot.record import Recorder
+from vlnpilot.safety import OVERLAYS, SHIELDS, SafetyConfig, SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
-from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, judge, shortest_path_length, spl
+from vlnpilot.tasks import SuccessConfig, Task, judge
 from vlnpilot.types import GroundTruth, Observation, Pose
+
+__all__ = ["OUTCOMES", "EpisodeConfig", "EpisodeResult", "Gate", "LoopControl", "StepCallback", "run_episode"]
 
 # halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move)
 OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "aborted")
@@ -86,43 +78,6 @@ class EpisodeConfig:
 
 
 @dataclass(frozen=True)
-class EpisodeResult:
-    outcome: str
-    reason: str
-    steps: int
-    path_length_m: float
-    shortest_path_m: float
-    spl: float
-    collisions: int
-    invalid_decisions: int
-    oscillations: int
-    final_state: str
-    final_room: str | None
-    contact: str | None
-    input_tokens: int
-    cached_tokens: int
-    output_tokens: int
-    cost_usd: float
-    latency_s_total: float
-    pilot_calls: int
-    wall_time_s: float
-    interventions: int = 0  # commands changed by the safety layer (guard, door assist, shield)
-    oscillation_events: int = 0  # oscillation stretches the guard detected (also with the shield off)
-    shield: str = "off"
-    judged_by: str = "ground_truth"  # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
-
-    @property
-    def success(self) -> bool:
-        return self.outcome == "success"
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-StepCallback = Callable[[dict[str, Any]], None]
-
-
-@dataclass(frozen=True)
 class Gate:
     """What a loop control (the live station, vlnpilot.live) says before a step: who flies it, or stop here."""
 
@@ -147,259 +102,165 @@ def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
     return gt
 
 
-@dataclass(frozen=True)
-class _Answer:
-    """One pilot call, parsed and validated. A rejected reply keeps its text and the tokens it cost."""
-
-    decision: Decision | None
-    error: str | None = None
-    fatal: bool = False
-    usage: Usage = field(default_factory=Usage)
-    raw_text: str | None = None
-    kind: str | None = None  # the pilot's short reason code (refusal, truncated, invalid_enum, ...)
-    hint: str | None = None  # the pilot's own one-line advice for the re-ask, if it has one
-
-
-def _ask(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> _Answer:
-    try:
-        decision = pilot.decide(pin)
-    except PilotError as exc:
-        return _Answer(None, f"{exc.reason}: {exc}", exc.fatal, getattr(exc, "usage", None) or Usage(),
-                       getattr(exc, "raw_text", None), exc.reason, getattr(exc, "feedback", None))
-    except DecisionError as exc:
-        return _Answer(None, f"malformed answer: {exc}", raw_text=exc.raw_text, kind="malformed")
-    if getattr(pilot, "validates_decisions", False):  # a model pilot checked it against this very state: once
-        return _Answer(decision, usage=decision.usage, raw_text=decision.raw_text)
-    decision = normalize_decision(decision)
-    error = validate_decision(decision, state, profile)
-    return _Answer(decision, error, usage=decision.usage, raw_text=decision.raw_text,
-                   kind="invalid_decision" if error else None)
-
-
-class _Deadline:
-    """Runs pilot calls in a helper (daemon) thread so that a step can stop waiting when its deadline passes.
-
-    A call still running at the deadline is abandoned and cancelled (`cancel_pending`: its SDK sends no further
-    request, retries included), and the next call gets a fresh thread, so a hung request never blocks the
-    episode, never calls the provider after the episode, and never holds up the process's exit.
-    """
-
-    def __init__(self, seconds: float | None, pilot: Pilot | None = None):
-        self.seconds = seconds
-        self._pilot = pilot
-
-    def ask(self, pilot: Pilot, pin: PilotInput, state: State, profile: str, remaining_s: float) -> _Answer:
-        if self.seconds is None:
-            return _ask(pilot, pin, state, profile)
-        if remaining_s <= 0:
-            return self.expired()
-        finished, answer = call_in_daemon_thread(lambda: _ask(pilot, pin, state, profile), remaining_s)
-        if not finished:
-            self._cancel()
-            return self.expired()
-        return answer
-
-    def _cancel(self) -> None:
-        cancel = getattr(self._pilot, "cancel_pending", None)
-        if callable(cancel):
-            cancel()
-
-    def expired(self) -> _Answer:
-        return _Answer(None, f"step_deadline: no valid answer within the step deadline of {self.seconds:g} s",
-                       kind="step_deadline")
-
-    def close(self) -> None:
-        self._cancel()  # the episode is over: nothing may call the provider for it any more
-
-
-def _needs_confirmation(context: ContextConfig, decision: Decision | None, asked: dict[str, Any] | None) -> bool:
-    """A valid answer that declares a final state, not yet confirmed, with the confirm_final context item on."""
-    return (context.confirm_final and asked is None and decision is not None
-            and parse_state(decision.state) in FINAL_STATES)
-
-
 def _reseed(pilot: Pilot, seed: int | None) -> None:
     """Give a stochastic pilot the episode's seed (pilots with a `reseed(seed)` method, e.g. noisy-oracle)."""
     if seed is not None and callable(getattr(pilot, "reseed", None)):
         pilot.reseed(seed)
 
 
+class _NoControl:
+    """No loop control: every step is the pilot's, nothing stops the episode early."""
+
+    def before_step(self, step: int) -> Gate:
+        return Gate()
+
+    def abort_reason(self) -> str | None:
+        return None
+
+
+@dataclass(frozen=True)
+class _End:
+    outcome: str
+    reason: str
+    contact: str | None = None
+    judged_by: str | None = None  # None: by ground truth if there is any, else nobody
+
+
 def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
                 judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
-    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given.
-
-    Without ground truth (a real robot) a declared final state is a success only as declared, unless
-    `judge_outcome` (the operator) confirms or rejects it.
-    """
-    config = config or EpisodeConfig()
-    t_start = time.perf_counter()
+    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given. Without ground
+    truth (a real robot) a final state is a success as declared, unless `judge_outcome` (the operator) rules."""
+    config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
-    _reseed(pilot, config.seed)
-    scene = env.scene
-    safety: SafetyLayer = make_safety(config.shield, env, scene, config.safety)
-    safety.reset(obs)
-    notes: tuple[str, ...] = ()  # safety feedback for the next prompt
-    spawn_id = spawn.id if isinstance(spawn, Spawn) else spawn
-    topo = scene.topological_map()
-    shortest = shortest_path_length(scene, obs.pose, task, config.success)
-    path, osc = PathLength(), Oscillations()
-    path.reset()
-    osc.reset()
-    usage = Usage()
-    calls = invalid = failed_streak = 0
-    state, previous = State.RECOGNIZE_ROOM, None  # Start: the controller takes off, then Recognize Room
-    outcome, reason, contact = "max_steps", f"no final state within {config.max_steps} steps", None
-    judged_by = "ground_truth" if gt is not None else "none"
-
-    if recorder is not None:
-        frames = recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
-        recorder.start({
-            "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
-            "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
-            "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
-                       "context": {"preset": context_name(config.context), **config.context.to_dict()},
-                       "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
-                       "overlay": config.overlay, "safety": config.safety.to_dict()},
-            "start_pose": obs.pose.as_dict(), "start_frames": frames,
-            "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
-            "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
-                           "scene_fingerprint": scene.fingerprint(),
-                           "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
-        })
-
-    _tell_pilot_the_episode(pilot, scene, config)
-    pilot_context = PilotContext(config.context, config.max_steps)
-    steps = 0
-    bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
-    deadline = _Deadline(config.step_deadline_s if bounded else None, pilot)
+    safety, measures, recording, asker = _start(env, pilot, task, config, obs, recorder, on_step, spawn, pilot_spec)
+    state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
     for step in range(1, config.max_steps + 1):
-        gate = control.before_step(step) if control is not None else Gate()
+        gate = control.before_step(step)
         if gate.abort is not None:
-            outcome, reason = "aborted", gate.abort
+            end = _End("aborted", gate.abort)
             break
         steps = step
-        flier = gate.pilot or pilot  # a person's decisions need no deadline: they wait for the keyboard
-        ask = deadline.ask if gate.pilot is None else (lambda p, pin, s, prof, _left: _ask(p, pin, s, prof))
-        feedback: list[str] = list(notes)
-        failures: list[dict[str, Any]] = []
-        decision: Decision | None = None
-        fatal = False
-        image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
-        step_end = time.monotonic() + (config.step_deadline_s or 0.0)
-        context_lines = pilot_context.lines(step)
-        confirmation: dict[str, Any] | None = None
-        attempt, reasks = 0, 0
-        while reasks <= config.max_reasks:
-            pin = PilotInput(image=image, query=task.query, topological_map=topo, state=state,
-                             previous_movement=previous, step=step, profile=config.profile, feedback=tuple(feedback),
-                             context=context_lines)
-            answer = ask(flier, pin, state, config.profile, step_end - time.monotonic())
-            calls += 1
-            attempt += 1
-            usage = usage + answer.usage
-            fatal = answer.fatal
-            if answer.error is None and _needs_confirmation(config.context, answer.decision, confirmation):
-                # A final state ends the episode for good: ask once more, with a warning (costs a call, not a step).
-                first = parse_state(answer.decision.state)
-                confirmation = {"attempt": attempt - 1, "first": answer.decision.core(),
-                                "raw_text": answer.decision.raw_text}
-                feedback = [*notes, confirmation_note(first)]
-                continue
-            if answer.error is None:
-                decision = answer.decision
-                if confirmation is not None:
-                    confirmation["confirmed"] = decision.state == confirmation["first"]["state"]
-                break
-            reasks += 1
-            failures.append({"attempt": attempt - 1, "reason": answer.error, "kind": answer.kind, "fatal": fatal,
-                             "raw_text": answer.raw_text})
-            if fatal or answer.kind == "step_deadline" or answer.kind in TRANSIENT_REASONS:
-                break  # re-ask only an unusable answer; a transient failure is the transport's, not the model's
-            why = answer.hint or f"{answer.error}. Answer again with valid values."
-            feedback = [*notes, f"Your previous answer was rejected: {why}"]
-
-        abort = control.abort_reason() if control is not None else None
-        if abort is not None:  # stopped while the pilot thought: its answer is recorded, never executed
-            outcome, reason = "aborted", abort
-            _record(recorder, on_step, step, state, decision, failures, None, None, obs, obs.pose, None, None, None,
-                    confirmation=confirmation)
+        answer = asker.ask(step, state, obs, person=gate.pilot)  # observe, ask, validate
+        end = _not_to_execute(control, answer)
+        if end is not None:  # recorded, never executed
+            _unexecuted(step, state, answer, obs, measures, recording)
             break
-        if fatal:
-            outcome, reason = "pilot_error", failures[-1]["reason"]
-            _record(recorder, on_step, step, state, None, failures, None, None, obs, obs.pose, None, None, None,
-                    confirmation=confirmation)
+        verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
+        pose_before, (obs, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
+        measures.update(StepFacts(tuple(answer.usages), answer.valid, verdict.command, pose_before, obs.pose))
+        recording.step(_flown(step, state, answer, verdict, pose_before, obs, gt, measures, config.profile))
+        asker.flown(step, state, answer, verdict.command, verdict.next_state, verdict.feedback)
+        end = _stopped(halt, obs, answer, asker.failed_streak, config.max_failed_steps)
+        if end is None:  # the FSM moves on; a final state ends the episode, judged
+            state = verdict.next_state
+            end = _judged(task, state, gt, config, judge_outcome) if state in FINAL_STATES else None
+        if end is not None:
             break
-
-        pose_before = obs.pose
-        if decision is None:
-            invalid += 1
-            failed_streak += 1
-            command, next_state = HOVER, state
-        else:
-            failed_streak = 0
-            command, next_state = get_command(decision.movement), parse_state(decision.state)
-        verdict = safety.filter(step, state, command, next_state, pose_before)
-        command, next_state, notes = verdict.command, verdict.next_state, verdict.feedback
-        halt: RobotHalt | None = None
-        try:
-            obs = env.step(command)
-        except RobotHalt as exc:  # a real robot's safety rule (battery, geofence, lost reply) ends the episode
-            halt = exc
-            obs = exc.observation if isinstance(exc.observation, Observation) else obs
-        safety.observe(obs)
-        path.update(pose_before, obs.pose)
-        reversal = osc.update(command)
-        room_now = gt.room() if gt is not None else None
-        override = override_reason(state, config.profile, command, decision is None, verdict.interventions,
-                                   next_state)
-        _record(recorder, on_step, step, state, decision, failures, command, next_state, obs, pose_before,
-                room_now, reversal, verdict, override, confirmation)
-        pilot_context.update(step, state, decision, command, next_state)
-        previous = command.code
-
-        if halt is not None:
-            outcome, reason = "halted", str(halt)
-            break
-        if obs.collided:
-            outcome, reason, contact = "collision", f"touched {obs.contact}", obs.contact
-            break
-        if decision is None and failed_streak >= config.max_failed_steps:
-            outcome, reason = "pilot_error", f"no valid decision in {failed_streak} consecutive steps"
-            break
-        state = next_state
-        if state in FINAL_STATES:
-            if gt is None and judge_outcome is not None:
-                ok, reason = judge_outcome(task, state)
-                outcome, judged_by = ("success" if ok else "false_success"), "operator"
-            elif gt is None:
-                outcome, reason, judged_by = "success", "final state declared (no ground truth to judge it)", "declared"
-            else:
-                ok, why = judge(task, state, gt, config.success)
-                outcome, reason = ("success" if ok else "false_success"), why
-            break
-
-    deadline.close()
-    final_room = gt.room() if gt is not None else None
-    result = EpisodeResult(
-        outcome=outcome, reason=reason, steps=steps, path_length_m=round(path.value(), 4),
-        shortest_path_m=round(shortest, 4), spl=round(spl(outcome == "success", shortest, path.value()), 4),
-        collisions=int(outcome == "collision"), invalid_decisions=invalid, oscillations=osc.value(),
-        final_state=state.value, final_room=final_room, contact=contact,
-        input_tokens=usage.input_tokens, cached_tokens=usage.cached_tokens, output_tokens=usage.output_tokens,
-        cost_usd=round(usage.cost_usd, 6), latency_s_total=round(usage.latency_s, 4), pilot_calls=calls,
-        wall_time_s=round(time.perf_counter() - t_start, 3), interventions=len(safety.interventions),
-        oscillation_events=len(safety.events), shield=safety.name, judged_by=judged_by,
-    )
-    if recorder is not None:
-        recorder.finish({"result": result.to_dict(), "end_pose": obs.pose.as_dict(),
-                         "safety": {"shield": safety.name,
-                                    "interventions": [i.to_dict() for i in safety.interventions],
-                                    "oscillation_events": [e.to_dict() for e in safety.events]}})
+    asker.close()
+    end = end or _End("max_steps", f"no final state within {config.max_steps} steps")
+    result = _result(end, steps, state, gt, measures.values(EpisodeEnd(end.outcome, safety)), t_start)
+    recording.finish(result, obs.pose, safety)
     _tell_pilot_the_outcome(pilot, result)
     return result
+
+
+def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, obs: Observation,
+           recorder: Recorder | None, on_step: StepCallback | None, spawn: str | Spawn | None,
+           pilot_spec: str | None) -> tuple[SafetyLayer, Measures, EpisodeRecording, PilotAsker]:
+    """Before the first step: seed the pilot, reset the safety layer and the measures, write the run's header."""
+    _reseed(pilot, config.seed)
+    safety = make_safety(config.shield, env, env.scene, config.safety)
+    safety.reset(obs)
+    measures = Measures(EpisodeStart(env.scene, obs.pose, task, config.success))
+    recording = EpisodeRecording(recorder, on_step)
+    recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
+                    pilot_spec=pilot_spec, safety=safety, obs=obs)
+    _tell_pilot_the_episode(pilot, env.scene, config)
+    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
+
+
+def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
+                recording: EpisodeRecording) -> None:
+    """A step that ends the episode before anything is executed still costs its calls and is recorded."""
+    measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose))
+    recording.step(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
+                              confirmation=answer.confirmation))
+
+
+def _not_to_execute(control: LoopControl, answer: StepAnswer) -> _End | None:
+    """Stopped while the pilot thought (its answer is recorded, never executed), or a fatal pilot error."""
+    abort = control.abort_reason()
+    if abort is not None:
+        return _End("aborted", abort)
+    if answer.fatal:
+        return _End("pilot_error", answer.failures[-1]["reason"])
+    return None
+
+
+def _proposed(answer: StepAnswer, state: State) -> tuple[Command, State]:
+    """The pilot's command and next state; without a valid decision the drone hovers and the state stays."""
+    if answer.decision is None:
+        return HOVER, state
+    return get_command(answer.decision.movement), parse_state(answer.decision.state)
+
+
+def _execute(env: Environment, safety: SafetyLayer, command: Command,
+             before: Observation) -> tuple[Observation, RobotHalt | None]:
+    """Fly `command`. A real robot's safety rule (battery, geofence, lost reply) ends the episode: `halt`."""
+    halt: RobotHalt | None = None
+    try:
+        obs = env.step(command)
+    except RobotHalt as exc:
+        halt = exc
+        obs = exc.observation if isinstance(exc.observation, Observation) else before
+    safety.observe(obs)
+    return obs, halt
+
+
+def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, pose_before: Pose,
+           obs: Observation, gt: GroundTruth | None, measures: Measures, profile: str) -> StepRecord:
+    """The record of an executed step; `override` says why a command outside the state's moves ran."""
+    override = override_reason(state, profile, verdict.command, not answer.valid, verdict.interventions,
+                               verdict.next_state)
+    return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, verdict.command,
+                      verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
+                      override, answer.confirmation)
+
+
+def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, failed_streak: int,
+             max_failed_steps: int) -> _End | None:
+    """An end after an executed step that is not a final state: a robot's halt, a collision, a failing pilot."""
+    if halt is not None:
+        return _End("halted", str(halt))
+    if obs.collided:
+        return _End("collision", f"touched {obs.contact}", contact=obs.contact)
+    if not answer.valid and failed_streak >= max_failed_steps:
+        return _End("pilot_error", f"no valid decision in {failed_streak} consecutive steps")
+    return None
+
+
+def _judged(task: Task, state: State, gt: GroundTruth | None, config: EpisodeConfig,
+            judge_outcome: JudgeOutcome | None) -> _End:
+    """A declared final state: judged by ground truth, by the operator, or taken as declared."""
+    if gt is None and judge_outcome is not None:
+        ok, reason = judge_outcome(task, state)
+        return _End("success" if ok else "false_success", reason, judged_by="operator")
+    if gt is None:
+        return _End("success", "final state declared (no ground truth to judge it)", judged_by="declared")
+    ok, why = judge(task, state, gt, config.success)
+    return _End("success" if ok else "false_success", why)
+
+
+def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measured: dict[str, Any],
+            t_start: float) -> EpisodeResult:
+    final_room = gt.room() if gt is not None else None
+    judged_by = end.judged_by or ("ground_truth" if gt is not None else "none")
+    return EpisodeResult(outcome=end.outcome, reason=end.reason, steps=steps, final_state=state.value,
+                         final_room=final_room, contact=end.contact, judged_by=judged_by,
+                         wall_time_s=round(time.perf_counter() - t_start, 3), **measured)
 
 
 def _tell_pilot_the_episode(pilot: Pilot, scene: Any, config: EpisodeConfig) -> None:
@@ -414,44 +275,3 @@ def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
     finished = getattr(pilot, "episode_finished", None)
     if callable(finished):
         finished(result)
-
-
-def _record(recorder: Recorder | None, on_step: StepCallback | None, step: int, state: State,
-            decision: Decision | None, failures: list[dict[str, Any]], command: Command | None,
-            next_state: State | None, obs: Observation, pose_before: Pose, room_now: str | None,
-            reversal: bool | None, verdict: SafetyVerdict | None = None, override: str | None = None,
-            confirmation: dict[str, Any] | None = None) -> None:
-    record: dict[str, Any] = {
-        "step": step,
-        "state": state.value,
-        "decision": decision.core() if decision else None,
-        "raw_text": decision.raw_text if decision else None,
-        "usage": decision.usage.model_dump() if decision else None,
-        "model": decision.model if decision else None,
-        "failures": failures,
-        "proposed": decision.movement if decision else None,
-        "executed": command.code if command else None,
-        "override": override,  # why an executed command outside the state's allowed moves ran (vlnpilot.overrides)
-        "next_state": next_state.value if next_state else None,
-        "pose_before": pose_before.as_dict(),
-        "pose_after": obs.pose.as_dict(),
-        "collided": obs.collided,
-        "contact": obs.contact,
-        "contact_part": obs.contact_part,
-        "room_true": room_now,
-        "oscillation": bool(reversal),
-        "interventions": [i.to_dict() for i in verdict.interventions] if verdict else [],
-        "oscillation_event": verdict.oscillation.to_dict() if verdict and verdict.oscillation else None,
-        "safety_feedback": list(verdict.feedback) if verdict else [],
-    }
-    if confirmation is not None:  # only with the confirm_final context item, so paper-context records are unchanged
-        record["confirmation"] = confirmation
-    if decision is not None and decision.model == HUMAN:  # a person flew this step from the live station
-        record["human"] = True
-    if obs.info:  # a real robot's facts: frame age, battery, safety events
-        record["robot"] = obs.info
-    if recorder is not None:
-        record["frames"] = recorder.save_observation(step, obs.front_rgb, obs.rear_rgb)
-        recorder.step(record)
-    if on_step is not None:
-        on_step(record)

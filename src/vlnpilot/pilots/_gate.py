@@ -1,7 +1,7 @@
 """Cancelling abandoned provider calls, so that nothing calls a provider after its step (or episode) gave up.
 
 The controller runs a network-bound pilot call in a helper thread and stops waiting at the step deadline
-(`episode._Deadline`). The SDK inside that thread would go on retrying for up to timeout x retries. A CallGate
+(`episode_ask.Deadline`). The SDK inside that thread would go on retrying for up to timeout x retries. A CallGate
 stops it: each call notes the gate's generation in its own thread; `cancel()` moves the generation on, and every
 HTTP request of an older call (an SDK retry included) is refused before it leaves the machine.
 """

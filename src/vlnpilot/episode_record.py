@@ -1,0 +1,126 @@
+"""What an episode writes: the run's header, one `StepRecord` per step, and the summary at the end.
+
+`StepRecord.to_dict` is the line of `episode.jsonl` (and what `on_step` receives); its keys and their order are
+the recorded format, read by `report/` and the replay pilot.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, Any
+
+from vlnpilot.commands import Command
+from vlnpilot.context import context_name
+from vlnpilot.decision import Decision
+from vlnpilot.environment import Environment, capabilities_of
+from vlnpilot.fsm import State
+from vlnpilot.pilots.base import Pilot
+from vlnpilot.pilots.keyboard import HUMAN
+from vlnpilot.prompting import prompt_hash
+from vlnpilot.record import Recorder, git_sha, package_versions
+from vlnpilot.safety import SafetyLayer, SafetyVerdict
+from vlnpilot.tasks import Task
+from vlnpilot.types import Observation, Pose
+
+if TYPE_CHECKING:
+    from vlnpilot.episode import EpisodeConfig
+    from vlnpilot.episode_measures import EpisodeResult
+
+StepCallback = Callable[[dict[str, Any]], None]
+
+
+@dataclass(frozen=True)
+class StepRecord:
+    """One step. Without `command` nothing was executed (the episode was aborted, or the pilot failed fatally)."""
+
+    step: int
+    state: State
+    decision: Decision | None
+    failures: list[dict[str, Any]]
+    pose_before: Pose
+    obs: Observation  # after the step (the same as before when nothing was executed)
+    command: Command | None = None
+    next_state: State | None = None
+    room_true: str | None = None
+    oscillation: bool = False
+    verdict: SafetyVerdict | None = None
+    override: str | None = None  # why an executed command outside the state's allowed moves ran
+    confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
+
+    def to_dict(self) -> dict[str, Any]:
+        d, obs, verdict = self.decision, self.obs, self.verdict
+        record: dict[str, Any] = {
+            "step": self.step,
+            "state": self.state.value,
+            "decision": d.core() if d else None,
+            "raw_text": d.raw_text if d else None,
+            "usage": d.usage.model_dump() if d else None,
+            "model": d.model if d else None,
+            "failures": self.failures,
+            "proposed": d.movement if d else None,
+            "executed": self.command.code if self.command else None,
+            "override": self.override,
+            "next_state": self.next_state.value if self.next_state else None,
+            "pose_before": self.pose_before.as_dict(),
+            "pose_after": obs.pose.as_dict(),
+            "collided": obs.collided,
+            "contact": obs.contact,
+            "contact_part": obs.contact_part,
+            "room_true": self.room_true,
+            "oscillation": self.oscillation,
+            "interventions": [i.to_dict() for i in verdict.interventions] if verdict else [],
+            "oscillation_event": verdict.oscillation.to_dict() if verdict and verdict.oscillation else None,
+            "safety_feedback": list(verdict.feedback) if verdict else [],
+        }
+        if self.confirmation is not None:  # only with confirm_final, so paper-context records are unchanged
+            record["confirmation"] = self.confirmation
+        if d is not None and d.model == HUMAN:  # a person flew this step from the live station
+            record["human"] = True
+        if obs.info:  # a real robot's facts: frame age, battery, safety events
+            record["robot"] = obs.info
+        return record
+
+
+class EpisodeRecording:
+    """The recorder (run directory) and the `on_step` callback, either of which may be absent."""
+
+    def __init__(self, recorder: Recorder | None, on_step: StepCallback | None):
+        self.recorder, self.on_step = recorder, on_step
+
+    def start(self, env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, *, spawn_id: str | None,
+              pilot_spec: str | None, safety: SafetyLayer, obs: Observation) -> None:
+        if self.recorder is None:
+            return
+        scene = env.scene
+        frames = self.recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
+        self.recorder.start({
+            "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
+            "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
+            "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
+                       "context": {"preset": context_name(config.context), **config.context.to_dict()},
+                       "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
+                       "overlay": config.overlay, "safety": config.safety.to_dict()},
+            "start_pose": obs.pose.as_dict(), "start_frames": frames,
+            "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
+            "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
+                           "scene_fingerprint": scene.fingerprint(),
+                           "versions": package_versions(), "started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")},
+        })
+
+    def step(self, record: StepRecord) -> None:
+        line = record.to_dict()
+        if self.recorder is not None:
+            line["frames"] = self.recorder.save_observation(record.step, record.obs.front_rgb, record.obs.rear_rgb)
+            self.recorder.step(line)
+        if self.on_step is not None:
+            self.on_step(line)
+
+    def finish(self, result: EpisodeResult, end_pose: Pose, safety: SafetyLayer) -> None:
+        if self.recorder is None:
+            return
+        self.recorder.finish({"result": result.to_dict(), "end_pose": end_pose.as_dict(),
+                              "safety": {"shield": safety.name,
+                                         "interventions": [i.to_dict() for i in safety.interventions],
+                                         "oscillation_events": [e.to_dict() for e in safety.events]}})
