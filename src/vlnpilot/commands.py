@@ -94,3 +94,10 @@ def get_command(code: str) -> Command:
         return COMMANDS[key]
     except KeyError:
         raise UnknownNameError("command", code, COMMANDS) from None
+
+
+def command_table_markdown() -> str:
+    """The command table for the docs (the README holds it verbatim; a test keeps them equal)."""
+    rows = ["| command | what it does |", "|---|---|"]
+    rows += [f"| `{c.code}` | {c.description} |" for c in COMMANDS.values()]
+    return "\n".join(rows)
