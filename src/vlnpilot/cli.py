@@ -128,12 +128,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.record import Recorder, claim_run_dir, default_run_dir
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
-    from vlnpilot.robots.session import DEFAULT_SHIELDS, check_robot, open_robot, robot_capabilities
+    from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
+    from vlnpilot.safety import default_shield
     from vlnpilot.scene import load_scene
     from vlnpilot.tasks import parse_query
 
     robot = check_robot(robot, tello_host)
-    shield = shield or DEFAULT_SHIELDS[robot]
+    shield = shield or default_shield(robot_capabilities(robot).ground_truth)
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
@@ -275,7 +276,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           seed: Annotated[int | None, typer.Option("--seed", help="Base seed of the repetitions.")] = None,
           profile: Annotated[str | None, typer.Option("--profile", help="FSM profile: paper or fast.")] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
-          shield: Annotated[str, typer.Option("--shield", help="off, geometry or depth.")] = "geometry",
+          shield: Annotated[str | None, typer.Option("--shield", help="off, geometry or depth (default: geometry).")]
+          = None,
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
           context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True) -> None:
@@ -285,13 +287,14 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     from vlnpilot.bench.command import bench_command
     from vlnpilot.bench.results import RESULTS, ResultsLog
     from vlnpilot.exits import check_base_url, exit_code_for
+    from vlnpilot.safety import DEFAULT_SHIELD
 
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     if context != "paper":
         options["context"] = context
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
-                              profile=profile, base_url=check_base_url(base_url), shield=shield,
+                              profile=profile, base_url=check_base_url(base_url), shield=shield or DEFAULT_SHIELD,
                               episode_options=options)
     if report:
         from vlnpilot.report.html import write_bench_report

@@ -14,7 +14,6 @@ from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.scene import Scene
 
 ROBOTS = ("sim", "tello")
-DEFAULT_SHIELDS = {"sim": "geometry", "tello": "assist"}  # the Tello has neither ground truth nor depth
 
 
 def check_robot(robot: str, tello_host: str | None) -> str:

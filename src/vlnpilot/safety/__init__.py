@@ -71,6 +71,7 @@ from vlnpilot.safety.config import (
     OscillationEvent,
     SafetyConfig,
     SafetyVerdict,
+    default_shield,
     obstacle_kind,
 )
 from vlnpilot.safety.guard import (
@@ -97,7 +98,7 @@ from vlnpilot.safety.shields import (
 __all__ = [
     "ASSIST_NOTE",
     "ClearanceQuery",
-    "DEFAULT_SHIELD",
+    "DEFAULT_SHIELD", "default_shield",
     "DOOR_STATES",
     "DepthConfig",
     "DepthShield",

@@ -11,6 +11,12 @@ from vlnpilot.fsm import State
 
 SHIELDS = ("off", "geometry", "depth", "assist")  # assist: door assist and oscillation guard, no shield (a Tello)
 DEFAULT_SHIELD = "geometry"  # the CLI's default in the simulator; the library default stays "off" (paper behaviour)
+
+
+def default_shield(ground_truth: bool) -> str:
+    """The command line's shield for an environment: the exact one where there is ground truth (the simulator),
+    else the door assist and oscillation guard alone (a real Tello has neither ground truth nor depth)."""
+    return DEFAULT_SHIELD if ground_truth else "assist"
 OVERLAYS = ("corridor",)
 
 # Prefixes of the feedback lines, so a pilot (or a test) can tell them apart.
