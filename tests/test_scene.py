@@ -121,3 +121,18 @@ def test_floorplan_draws_rooms_doors_targets_and_a_trajectory(scene, tmp_path):
         draw_floorplan(scene, goal="garage")
     with pytest.raises(ValueError):
         draw_floorplan(scene, trajectory=trajectory, states=states[:2])
+
+
+def test_the_fingerprint_covers_the_furniture() -> None:
+    """A recording names the scene it flew by its fingerprint: moving one solid must change it."""
+    from dataclasses import replace
+
+    from vlnpilot.scene import load_scene
+
+    cabin = load_scene("cabin")
+    assert cabin.fingerprint() == load_scene("cabin").fingerprint()
+    bed = next(i for i, s in enumerate(cabin.solids) if s.name == "bed_frame")
+    moved = replace(cabin.solids[bed], pos=(cabin.solids[bed].pos[0] + 0.01, *cabin.solids[bed].pos[1:]))
+    shifted = replace(cabin, solids=(*cabin.solids[:bed], moved, *cabin.solids[bed + 1:]))
+    assert shifted.fingerprint() != cabin.fingerprint()
+    assert cabin.fingerprint() != load_scene("cabin-v1").fingerprint()

@@ -256,8 +256,12 @@ class Scene:
         }
 
     def fingerprint(self) -> str:
-        """A short hash of everything the scene is made of: a recording names the exact scene it flew."""
-        return hashlib.sha256(repr(self).encode("utf-8")).hexdigest()[:12]
+        """A short hash of everything the scene is made of: a recording names the exact scene it flew.
+
+        The solids, materials and lights are hashed too: the dataclass repr leaves them out (for readable
+        logs), and a moved bed must change the fingerprint as much as a moved door."""
+        content = (self, self.solids, self.materials, self.lights)
+        return hashlib.sha256(repr(content).encode("utf-8")).hexdigest()[:12]
 
     def info(self) -> dict[str, Any]:
         """Everything `vln-pilot scene info --json` prints."""
