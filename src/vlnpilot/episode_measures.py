@@ -151,25 +151,23 @@ class PilotUsage:
                 "cost_usd": round(u.cost_usd, 6), "latency_s_total": round(u.latency_s, 4), "pilot_calls": self.calls}
 
 
-class Collisions:
+class _ReadAtTheEnd:
+    """A measure that needs nothing per step: everything it reports is known when the episode ends."""
+
     def reset(self, start: EpisodeStart) -> None:
         pass
 
     def update(self, step: StepFacts) -> None:
         pass
 
+
+class Collisions(_ReadAtTheEnd):
     def value(self, end: EpisodeEnd) -> dict[str, Any]:
         return {"collisions": int(end.outcome == "collision")}
 
 
-class SafetyCounts:
+class SafetyCounts(_ReadAtTheEnd):
     """What the safety layer did: commands it changed, oscillation stretches its guard saw, its name."""
-
-    def reset(self, start: EpisodeStart) -> None:
-        pass
-
-    def update(self, step: StepFacts) -> None:
-        pass
 
     def value(self, end: EpisodeEnd) -> dict[str, Any]:
         s = end.safety
