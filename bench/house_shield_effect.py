@@ -20,7 +20,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from machine import cpu_model  # bench/machine.py, beside this script
+from machine import cpu_model, publish  # bench/machine.py, beside this script
 
 from vlnpilot.bench.suite import episode_seed, load_suite
 
@@ -83,10 +83,7 @@ def main(argv: list[str] | None = None) -> int:
         f"seeds in every condition), {suite.max_steps}-step limit, margin 5 cm. Wall time {wall:.0f} s on "
         f"{args.workers} worker processes, {cpu_model()} ({os.cpu_count()} cores visible), Python "
         f"{platform.python_version()}.", "", summarise(rows, shields), ""])
-    print(text)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    print(f"wrote {args.out}", file=sys.stderr)
+    publish(text, args.out)
     return 0
 
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import platform
+import sys
 from pathlib import Path
 
 
@@ -27,3 +28,11 @@ def describe() -> str:
     """One line: CPU model, cores, Python, and the load average (other processes share the cores)."""
     return (f"{cpu_model()}, {os.cpu_count()} cores, Python {platform.python_version()}, "
             f"load average {load_average()}")
+
+
+def publish(text: str, out: Path) -> None:
+    """Print a result table and keep it in `out` (bench/results/ by default), saying where."""
+    print(text)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
+    print(f"wrote {out}", file=sys.stderr)

@@ -21,7 +21,7 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
-from machine import cpu_model  # bench/machine.py, beside this script
+from machine import cpu_model, publish  # bench/machine.py, beside this script
 
 from vlnpilot.bench.suite import load_suite
 
@@ -120,10 +120,7 @@ def main(argv: list[str] | None = None) -> int:
         summarise(rows, shields),
         "",
     ])
-    print(text)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text)
-    print(f"wrote {args.out}", file=sys.stderr)
+    publish(text, args.out)
     return 0
 
 
