@@ -117,9 +117,9 @@ def test_bad_max_steps_is_a_usage_error(monkeypatch: pytest.MonkeyPatch, capsys:
 
 def test_interrupt_exits_130_and_keeps_the_steps(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
                                                  tmp_path: Path) -> None:
-    import vlnpilot.episode as episode
+    import vlnpilot.episode_run as episode_run  # the one place `vln-pilot run` and the bench fly an episode
 
-    real = episode.run_episode
+    real = episode_run.run_episode
 
     def interrupted(*args, on_step=None, **kwargs):
         def step(rec):
@@ -129,7 +129,7 @@ def test_interrupt_exits_130_and_keeps_the_steps(monkeypatch: pytest.MonkeyPatch
 
         return real(*args, on_step=step, **kwargs)
 
-    monkeypatch.setattr(episode, "run_episode", interrupted)
+    monkeypatch.setattr(episode_run, "run_episode", interrupted)
     out = tmp_path / "r"
     code, _, err = run_main(monkeypatch, capsys, "run", "Go to the bathroom", "--pilot", "oracle", "--out", str(out))
     assert code == 130 and "Traceback" not in err  # (typer turns Ctrl-C into exit 130 before main() sees it)

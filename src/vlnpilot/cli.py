@@ -123,10 +123,11 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 2 for bad input,
     130 when interrupted."""
     from vlnpilot.environment import check_capabilities
-    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.episode import EpisodeConfig
+    from vlnpilot.episode_run import run_recorded_episode
     from vlnpilot.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.record import Recorder, claim_run_dir, default_run_dir
+    from vlnpilot.record import claim_run_dir, default_run_dir
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
     from vlnpilot.safety import default_shield
@@ -168,16 +169,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
                                         operator=operator) as env, _sigterm_interrupts():
-        recorder = Recorder(run_dir, overwrite=True)  # claimed above
         try:
-            result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
-                                 pilot_spec=pilot, judge_outcome=judge_outcome, control=control)
+            result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
+                                          pilot_spec=pilot, overwrite=True,  # claimed above
+                                          on_step=show, judge_outcome=judge_outcome, control=control)
         except KeyboardInterrupt:
-            recorder.close("interrupted")
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
             raise typer.Exit(130) from None
-        finally:
-            recorder.close("failed")
     colour = "green" if result.success else "red"
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.bench.executors import BenchError
-from vlnpilot.bench.runner import BenchReport, BenchSettings, parse_pilots, run_bench
+from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 
 
 def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "oracle", reps: int | None = None,
@@ -37,7 +37,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
             raise BenchError("--resume needs --out: the bench directory to resume")
         out = default_run_dir("runs", f"bench-{Path(str(suite)).stem}")
     settings = BenchSettings(
-        suite=suite, pilots=parse_pilots(pilots), out=out, reps=reps, max_steps=max_steps, seed=seed,
+        suite=suite, pilots=pilots if isinstance(pilots, str) else tuple(pilots), out=out, reps=reps,
+        max_steps=max_steps, seed=seed,
         profile=profile, base_url=base_url, executor=executor,
         episode_options={"shield": str(shield or "off").lower(), **(episode_options or {})},
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render,
