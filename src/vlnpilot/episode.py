@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, context_preset
-from vlnpilot.environment import Environment
+from vlnpilot.environment import Environment, ground_truth_of
 from vlnpilot.episode_ask import PilotAsker, StepAnswer
 from vlnpilot.episode_measures import EpisodeEnd, EpisodeResult, EpisodeStart, Measures, StepFacts
 from vlnpilot.episode_record import EpisodeRecording, StepCallback, StepRecord
@@ -94,10 +94,11 @@ class LoopControl(Protocol):
 
 
 def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
-    gt = env.ground_truth() if hasattr(env, "ground_truth") else None
+    gt = ground_truth_of(env)  # only if the environment declares it (a real drone does not)
     if getattr(pilot, "privileged", False):
         if gt is None:
-            raise ConfigError(f"pilot {pilot.name!r} needs ground truth, which this environment does not provide")
+            raise ConfigError(f"pilot {pilot.name!r} needs ground truth, which this environment does not declare; "
+                              "use a model pilot")
         pilot.attach(gt)
     return gt
 
