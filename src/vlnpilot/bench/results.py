@@ -196,7 +196,7 @@ def call_latencies(record: dict[str, Any]) -> list[float]:
     return [float(res.get("latency_s_total") or 0.0) / calls] * calls if calls else []
 
 
-def summarize(pilot: str, records: Sequence[dict[str, Any]]) -> Any:
+def summarize(pilot: str, records: Sequence[dict[str, Any]]) -> PilotSummary:
     """Aggregate one pilot's episodes into a `PilotSummary` (SPL: the mean of the per-episode SPL)."""
     res = [r["result"] for r in records]
     n = len(res)
