@@ -104,9 +104,10 @@ class Column:
 
     `md` and `tex` are its headers in table.md and table.tex (None: not in that table), `csv` its headers in
     summary.csv (one or more; none: not there). `text(s)` is its Markdown cell, and its LaTeX cell unless
-    `tex_text` says otherwise; `csv_cells(s)` gives one value per `csv` header. `rank` orders the columns:
-    the bench's own (bench/tables.py) hold the tens from Pilot (0) to Latency p95 (180), a measure's column
-    takes the rank between them where it belongs, or `LAST`.
+    `tex_text` says otherwise; `csv_cells(s)` gives one value per `csv` header. `rank` orders the columns, in
+    tens from Pilot (0) to Latency p95 (180), the bench's own (bench/tables.py) and the measures' (SPL 50,
+    Collisions 70, Invalid decisions 110 ... Pilot calls 160) interleaved; a new one takes a free rank where it
+    belongs, or `LAST`.
     """
 
     rank: int
