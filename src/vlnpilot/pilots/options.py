@@ -103,9 +103,6 @@ class PilotOptions(BaseModel):
         out = {(fields[k].alias or k): getattr(self, k) for k in self.model_fields_set if k in fields}
         return {**out, **(self.model_extra or {})}
 
-    def __repr_args__(self):  # secrets are excluded by their fields' repr=False; this drops programmatic noise
-        return [(k, v) for k, v in super().__repr_args__() if k not in self.programmatic]
-
 
 class OpenPilotOptions(PilotOptions):
     """The options of a pilot registered without an options class (a plugin): anything goes to its factory."""
