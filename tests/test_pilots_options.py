@@ -192,7 +192,7 @@ def test_a_bench_without_pilot_options_hashes_as_before():
 
 
 def test_replay_gets_the_suite_row_because_its_options_take_one():
-    from vlnpilot.bench.executors import EpisodeSpec, _pilot_options
+    from vlnpilot.bench.episode_job import EpisodeSpec, _pilot_options
 
     fields = {f: None for f in EpisodeSpec.__dataclass_fields__}
     spec = EpisodeSpec(**{**fields, "pilot": "replay:trials/x", "row": "to-bedroom", "pilot_options": {}})
