@@ -129,9 +129,9 @@ def import_plugins(plugins: Sequence[str]) -> None:
 
 def _pilot_options(spec: EpisodeSpec) -> dict[str, Any]:
     """The spec's pilot options, plus the row id for pilots that fly one recording per row (replay of trials)."""
-    from vlnpilot.pilots.base import parse_spec, pilot_factory
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
 
-    wants_row = getattr(pilot_factory(parse_spec(spec.pilot)[0]), "wants_row", False)
+    wants_row = pilot_options_class(parse_spec(spec.pilot)[0]).accepts("row")
     return {**spec.pilot_options, "row": spec.row} if wants_row else dict(spec.pilot_options)
 
 

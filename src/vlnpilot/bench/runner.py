@@ -18,7 +18,7 @@ import hashlib
 import json
 import re
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -49,6 +49,7 @@ class BenchSettings:
     seed: int | None = None
     profile: str | None = None
     base_url: str | None = None  # given to every pilot that takes one (OpenAI-compatible servers, ...)
+    pilot_options: dict[str, str] = field(default_factory=dict)  # --pilot-option KEY=VALUE, to the pilots taking KEY
     episode_options: dict[str, Any] = field(default_factory=dict)  # extra EpisodeConfig fields, e.g. a shield
     executor: str = "local"
     workers: int | None = None  # episodes in flight; default: the number of cores
@@ -106,30 +107,43 @@ def _pilot_dir(spec: str) -> str:
 
 
 def _accepts(spec: str, option: str) -> bool:
-    """Whether the pilot's factory takes a keyword option (e.g. base_url); imports only that pilot's module."""
-    import inspect
-
-    from vlnpilot.errors import UnknownNameError
-    from vlnpilot.pilots.base import parse_spec, pilot_factory
+    """Whether the pilot's options class has an option (e.g. base_url); imports only that pilot's module."""
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
 
     try:
-        factory = pilot_factory(parse_spec(spec)[0])
+        return pilot_options_class(parse_spec(spec)[0]).accepts(option)
     except UnknownNameError:
         return False  # make_pilot raises the error that lists the known pilots
-    try:
-        params = inspect.signature(factory).parameters
-    except (TypeError, ValueError):
-        return False
-    return option in params
 
 
-def resolve_pilots(specs: Sequence[str], base_url: str | None) -> list[PilotEntry]:
+def _command_line_options(specs: Sequence[str], pairs: Mapping[str, str]) -> dict[str, dict[str, Any]]:
+    """Each pilot's share of the `--pilot-option` pairs (those its options class takes), coerced by that class.
+
+    Like base_url, an option goes to every pilot that takes it; one that no pilot takes is refused.
+    """
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
+
+    classes = {spec: pilot_options_class(parse_spec(spec)[0]) for spec in specs}
+    valid = sorted({key for cls in classes.values() for key in cls.settable()})
+    for key in pairs:
+        if key not in valid:
+            raise ConfigError(f"--pilot-option {key!r} is taken by none of the pilots {', '.join(specs)}; "
+                              f"valid keys: {', '.join(valid) or '(none)'}")
+    return {spec: cls.from_command_line(parse_spec(spec)[0], {k: v for k, v in pairs.items() if k in cls.settable()})
+            for spec, cls in classes.items()}
+
+
+def resolve_pilots(specs: Sequence[str], base_url: str | None,
+                   pilot_options: Mapping[str, str] | None = None) -> list[PilotEntry]:
     """Build each pilot once in the parent: unknown names, bad models or missing keys fail before anything runs."""
     from vlnpilot.pilots.base import make_pilot
 
+    given = _command_line_options(specs, pilot_options) if pilot_options else {}
     out, dirs = [], set()
     for spec in specs:
-        options = {"base_url": base_url} if base_url and _accepts(spec, "base_url") else {}
+        options = dict(given.get(spec, {}))
+        if base_url and _accepts(spec, "base_url"):
+            options["base_url"] = base_url
         pilot = make_pilot(spec, **options)
         close = getattr(pilot, "close", None)
         if callable(close):
@@ -227,7 +241,7 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     t0 = time.perf_counter()
     import_plugins(settings.plugins)
     suite = effective_suite(settings)
-    pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url)
+    pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url, settings.pilot_options)
     executor_factory(settings.executor)  # a bad name is refused before anything runs
     _check_episode_options(suite, settings.episode_options)
     config = config_of(suite, pilots, settings)
