@@ -30,7 +30,8 @@ from vlnpilot.bench import (
     wilson_interval,
 )
 from vlnpilot.bench.executors import split_workers
-from vlnpilot.bench.runner import MANIFEST, config_hash
+from vlnpilot.bench.manifest import MANIFEST
+from vlnpilot.bench.runner import config_hash
 from vlnpilot.bench.suite import suite_from_dict
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.tasks import spl
@@ -228,3 +229,75 @@ def test_bad_options_are_refused_before_anything_runs(tiny: Path, tmp_path: Path
     with pytest.raises(ConfigError, match="pilot.s. given twice: oracle"):
         bench_command(suite=str(tiny), pilots="oracle,oracle", out=out)
     assert not out.exists()
+
+
+# ------------------------------------------------------------------------------------------------ executors
+def test_a_registered_executor_runs_the_bench(tiny: Path, tmp_path: Path) -> None:
+    """An executor from outside the package: registered by name, it gets the options and every episode."""
+    from vlnpilot.bench import register_executor
+    from vlnpilot.bench.episode_job import Event, SimulatorCache, run_guarded
+    from vlnpilot.bench.executors import _EXECUTORS, ExecutorOptions
+
+    seen: dict[str, object] = {}
+
+    class Backwards:  # the last episode first: results must not depend on the order episodes finish in
+        describe = "backwards (test)"
+
+        def __init__(self, options: ExecutorOptions) -> None:
+            seen["options"] = options
+
+        def run(self, specs):
+            sims = SimulatorCache()
+            for spec in reversed(specs):
+                yield Event("started", spec.key)
+                record, error = run_guarded(spec, sims)
+                yield Event("finished" if error is None else "failed", spec.key, record, error)
+            sims.close_thread()
+
+        def close(self) -> None:
+            seen["closed"] = True
+
+    register_executor("backwards")(Backwards)
+    try:
+        report = run_bench(BenchSettings(suite=tiny, out=tmp_path / "b", executor="backwards", workers=3,
+                                         render=False, progress=False))
+    finally:
+        del _EXECUTORS["backwards"]
+    assert report.complete and report.executor == "backwards (test)" and seen["closed"] is True
+    assert seen["options"] == ExecutorOptions(workers=3, ray_address=None, plugins=())
+    reference = run_bench(inline(tiny, tmp_path / "i"))
+    keys = [(s.pilot, s.episodes, s.successes, s.spl) for s in report.summaries]
+    assert keys == [(s.pilot, s.episodes, s.successes, s.spl) for s in reference.summaries]
+    with pytest.raises(ConfigError, match="unknown executor 'backwards'"):
+        run_bench(BenchSettings(suite=tiny, out=tmp_path / "c", executor="backwards"))
+
+
+def test_the_executor_is_closed_when_the_bench_fails(tiny: Path, tmp_path: Path) -> None:
+    from vlnpilot.bench import register_executor
+    from vlnpilot.bench.episode_job import Event
+    from vlnpilot.bench.executors import _EXECUTORS
+
+    closed = []
+
+    class Failing:
+        describe = "failing (test)"
+
+        def __init__(self, options) -> None:
+            pass
+
+        def run(self, specs):
+            for spec in specs:
+                yield Event("started", spec.key)
+                yield Event("failed", spec.key, error="RuntimeError: no GPU today")
+
+        def close(self) -> None:
+            closed.append(True)
+
+    register_executor("failing")(Failing)
+    try:
+        with pytest.raises(BenchError, match="no GPU today"):
+            run_bench(BenchSettings(suite=tiny, out=tmp_path / "b", executor="failing", progress=False))
+    finally:
+        del _EXECUTORS["failing"]
+    assert closed == [True]
+    assert (tmp_path / "b" / "table.md").is_file()  # the tables are written whatever happened

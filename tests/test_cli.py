@@ -75,6 +75,14 @@ BAD_INPUT = [
     (["run", "Go to the bedroom", "--pilot", "oracle", "--profile", "turbo"], ["valid profiles: paper, fast"]),
     (["run", "Go to the bedroom", "--scene", "castle"], ["unknown scene 'castle'", "valid scenes: cabin"]),
     (["scene", "info", "--scene", "castle"], ["unknown scene 'castle'", "valid scenes: cabin"]),
+    (["run", "Go to the bedroom", "--pilot", "oracle", "--pilot-option", "detail=high"],
+     ["--pilot-option 'detail' of the oracle pilot: unknown option", "valid keys: approach_m, cross_m, lateral_tol_m, "
+      "view_m"]),
+    (["run", "Go to the bedroom", "--pilot", "openai", "--pilot-option", "timeout=-1"],
+     ["bad value for option 'timeout' of the openai pilot: Input should be greater than 0", "valid options: "]),
+    (["run", "Go to the bedroom", "--pilot", "oracle", "--pilot-option", "approach_m"], ["takes KEY=VALUE"]),
+    (["bench", "--pilots", "oracle", "--pilot-option", "detail=high"],
+     ["--pilot-option 'detail' is taken by none of the pilots oracle", "valid keys: approach_m"]),
 ]
 
 
@@ -82,7 +90,7 @@ BAD_INPUT = [
 def test_bad_input_is_one_clear_line(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
                                      tmp_path: Path, args: list[str], fragments: list[str]) -> None:
     out = tmp_path / "never"
-    extra = ["--out", str(out)] if args[0] == "run" else []
+    extra = ["--out", str(out)] if args[0] in ("run", "bench") else []
     code, _, err = run_main(monkeypatch, capsys, *args, *extra)
     assert code == 2
     assert "Traceback" not in err
@@ -91,6 +99,32 @@ def test_bad_input_is_one_clear_line(monkeypatch: pytest.MonkeyPatch, capsys: py
     for fragment in fragments:
         assert fragment in lines[0]
     assert not out.exists()  # validated before anything is created
+
+
+def test_a_secret_pilot_option_is_refused_and_never_echoed(monkeypatch: pytest.MonkeyPatch,
+                                                           capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    code, _, err = run_main(monkeypatch, capsys, "run", "Go to the bedroom", "--pilot", "openai", "--pilot-option",
+                            f"api_key={FAKE_KEY}", "--out", str(tmp_path / "never"))
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert "a secret does not go on the command line" in err and FAKE_KEY not in err
+
+
+def test_pilot_option_reaches_the_pilot(runner: CliRunner, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    from vlnpilot.pilots.oracle import OraclePilot
+
+    seen: list[float] = []
+    real_configure = OraclePilot._configure
+
+    def spy(self, options):
+        seen.append(options.approach_m)
+        real_configure(self, options)
+
+    monkeypatch.setattr(OraclePilot, "_configure", spy)
+    result = runner.invoke(cli.app, ["run", "Go to the bedroom", "--spawn", "bedroom", "--pilot", "oracle", "-q",
+                                     "--max-steps", "1", "--pilot-option", "approach_m=0.5", "--no-video",
+                                     "--out", str(tmp_path / "r")])
+    assert result.exit_code == 0, result.output
+    assert seen == [0.5]  # coerced from the string by OracleOptions
 
 
 @pytest.mark.parametrize("kind", ["under_a_file", "a_file"])
@@ -117,9 +151,9 @@ def test_bad_max_steps_is_a_usage_error(monkeypatch: pytest.MonkeyPatch, capsys:
 
 def test_interrupt_exits_130_and_keeps_the_steps(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
                                                  tmp_path: Path) -> None:
-    import vlnpilot.episode as episode
+    import vlnpilot.episode_run as episode_run  # the one place `vln-pilot run` and the bench fly an episode
 
-    real = episode.run_episode
+    real = episode_run.run_episode
 
     def interrupted(*args, on_step=None, **kwargs):
         def step(rec):
@@ -129,7 +163,7 @@ def test_interrupt_exits_130_and_keeps_the_steps(monkeypatch: pytest.MonkeyPatch
 
         return real(*args, on_step=step, **kwargs)
 
-    monkeypatch.setattr(episode, "run_episode", interrupted)
+    monkeypatch.setattr(episode_run, "run_episode", interrupted)
     out = tmp_path / "r"
     code, _, err = run_main(monkeypatch, capsys, "run", "Go to the bathroom", "--pilot", "oracle", "--out", str(out))
     assert code == 130 and "Traceback" not in err  # (typer turns Ctrl-C into exit 130 before main() sees it)

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 from vlnpilot.commands import COMMANDS, get_command
 from vlnpilot.decision import Decision, DecisionError, PilotInput
+from vlnpilot.environment import Capabilities
 from vlnpilot.episode import OUTCOMES, EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fsm import FINAL_STATES, State, parse_state, state_spec
@@ -63,6 +64,8 @@ class ScriptedPilot:
 class SpyEnv:
     """Wraps the simulator and logs every command that reaches it, with the pilot's step at that moment."""
 
+    capabilities = Capabilities(ground_truth=True, rear_view=True, contact_sensing=True)
+
     def __init__(self, sim: Simulator, pilot: ScriptedPilot):
         self.sim, self.pilot, self.scene = sim, pilot, sim.scene
         self.executed: list[tuple[int, str]] = []
@@ -82,6 +85,8 @@ class SpyEnv:
 
 class BlindEnv:
     """An Environment without ground truth (like a real drone)."""
+
+    capabilities = Capabilities(rear_view=True, contact_sensing=True)
 
     def __init__(self, sim: Simulator):
         self.sim, self.scene = sim, sim.scene

@@ -92,7 +92,7 @@ def test_house_env_builds_the_house_of_the_reset_seed() -> None:
 
 
 def test_the_simulator_cache_keeps_only_the_most_recent_houses_per_thread() -> None:
-    from vlnpilot.bench.executors import SimulatorCache
+    from vlnpilot.bench.episode_job import SimulatorCache
 
     cache = SimulatorCache(per_thread=2)
     try:

@@ -11,8 +11,9 @@ from pathlib import Path
 import pytest
 
 from report_samples import EVIL, expected_table, make_bench, make_run
+from vlnpilot import episode_record
 from vlnpilot.report.html import load_bench, write_bench_report, write_episode_report
-from vlnpilot.report.timeline import load_episode
+from vlnpilot.report.timeline import SHOWN_RAW, load_episode
 
 
 class _Collect(HTMLParser):
@@ -98,6 +99,21 @@ def test_timeline_shows_what_the_pilot_saw(run: Path) -> None:
     assert end.step is None and end.frames["front"] == "frames/front_008.jpg"
     assert ep.collision_point() == ep.steps[-1]["pose_after"]
     assert len(ep.trajectory()) == len(ep.trajectory_states()) == 9
+
+
+def test_timeline_reads_the_keys_the_step_record_writes(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The timeline knows the recorded format from `episode_record`: a key added to the step record is known at
+    once; the recorded keys the page has no place for, and keys no step record writes, are shown raw."""
+    monkeypatch.setitem(episode_record.ALWAYS_WRITTEN, "wind_mps", lambda record: 0.3)
+    run = make_run(tmp_path / "r", steps=2)
+    lines = [json.loads(line) for line in (run / "episode.jsonl").read_text().splitlines()]
+    every_key = dict.fromkeys(episode_record.step_keys(), None)
+    for rec in lines:
+        rec.update({**every_key, **rec, "wind_mps": 0.3, "override": "fallback", "vendor_note": "from elsewhere"})
+    (run / "episode.jsonl").write_text("".join(json.dumps(rec) + "\n" for rec in lines))
+    for entry in load_episode(run).entries[:-1]:
+        assert set(entry.extra) == {*SHOWN_RAW, "vendor_note"}
+        assert entry.extra["override"] == "fallback"
 
 
 def test_episode_video(run: Path) -> None:

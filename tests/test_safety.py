@@ -336,3 +336,12 @@ def test_safety_feedback_never_names_the_scene(geo_sim, spawn, query):
     assert any(line.startswith(("Safety shield", "Door assist")) for line in lines)  # the shield did speak
     leaked = [(line, n) for line in lines for n in names if n in line]
     assert not leaked, leaked[:3]
+
+
+def test_safety_never_imports_the_simulator():
+    """The shields see an environment only through what it declares (`environment`), never `vlnpilot.sim`."""
+    from test_layers import PACKAGE, imports
+
+    found = {(path.name, name) for path in (PACKAGE / "safety").glob("*.py") for name in imports(path)
+             if name == "vlnpilot.sim" or name.startswith("vlnpilot.sim.")}
+    assert not found

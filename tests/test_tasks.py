@@ -20,7 +20,7 @@ from vlnpilot.tasks import (
     shortest_path_length,
     spl,
 )
-from vlnpilot.types import GroundTruth, Pose
+from vlnpilot.types import GroundTruth, Motion, Pose
 
 # -- parse_query ---------------------------------------------------------------------------------------------
 PAPER_QUERIES = [  # Table 4 of the paper, and the goal each one names in the cabin
@@ -100,6 +100,12 @@ class FakeGroundTruth:
 
     def target_visible(self, target_id: str) -> bool:
         return self._visible
+
+    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
+        return None
+
+    def substeps(self, motion: Motion) -> int:
+        return 1
 
 
 ROOM_TASK = Task("Go to the bedroom", "bedroom")

@@ -25,6 +25,8 @@ err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wr
 
 SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name: cabin or house:SEED[?rooms=N&types=a,b].")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
+PilotOptionOpt = Annotated[list[str] | None, typer.Option(
+    "--pilot-option", metavar="KEY=VALUE", help="A pilot option, e.g. detail=high or timeout=30 (repeatable).")]
 
 
 def default_pilot_spec(env: dict[str, str] | None = None) -> tuple[str, str]:
@@ -93,7 +95,7 @@ def scene_render(scene: SceneOpt = "cabin",
 
 
 @app.command("run")
-def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to the bathroom".')],
+def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to the bathroom".')],  # noqa: PLR0913 - one parameter per flag (Typer)
         scene: SceneOpt = "cabin",
         spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
         pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC: name or name:model.")] = None,
@@ -101,6 +103,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         seed: Annotated[int | None, typer.Option("--seed")] = None,
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
+        pilot_option: PilotOptionOpt = None,
         profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
@@ -123,10 +126,11 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 2 for bad input,
     130 when interrupted."""
     from vlnpilot.environment import check_capabilities
-    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.episode import EpisodeConfig
+    from vlnpilot.episode_run import run_recorded_episode
     from vlnpilot.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.record import Recorder, claim_run_dir, default_run_dir
+    from vlnpilot.record import claim_run_dir, default_run_dir
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
     from vlnpilot.safety import default_shield
@@ -147,7 +151,9 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
-    options = {"base_url": check_base_url(base_url)} if base_url else {}
+    options = _pilot_options(pilot, pilot_option)
+    if base_url:
+        options["base_url"] = check_base_url(base_url)
     _say_remote_url(pilot)
     pilot_obj = make_pilot(pilot, **options)
     check_capabilities(robot_capabilities(robot), robot, shield=shield, pilot=pilot_obj)  # before anything flies
@@ -168,16 +174,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
                                         operator=operator) as env, _sigterm_interrupts():
-        recorder = Recorder(run_dir, overwrite=True)  # claimed above
         try:
-            result = run_episode(env, pilot_obj, task, config, spawn=spawn_id, recorder=recorder, on_step=show,
-                                 pilot_spec=pilot, judge_outcome=judge_outcome, control=control)
+            result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
+                                          pilot_spec=pilot, overwrite=True,  # claimed above
+                                          on_step=show, judge_outcome=judge_outcome, control=control)
         except KeyboardInterrupt:
-            recorder.close("interrupted")
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
             raise typer.Exit(130) from None
-        finally:
-            recorder.close("failed")
     colour = "green" if result.success else "red"
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
@@ -194,6 +197,15 @@ def _live_station(live: bool, run_dir: Path, pilot: object, scene: object, host:
     from vlnpilot.live.station import live_control
 
     return live_control(run_dir, pilot, scene, host=host, port=port, say=lambda line: console.print(escape(line)))
+
+
+def _pilot_options(spec: str, pairs: list[str] | None) -> dict:
+    """`--pilot-option KEY=VALUE`s, checked and coerced by the pilot's options class (one line for a bad one)."""
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
+    from vlnpilot.pilots.options import parse_option_pairs
+
+    name = parse_spec(spec)[0]
+    return pilot_options_class(name).from_command_line(name, parse_option_pairs(pairs or ()))
 
 
 @app.command("watch")
@@ -276,6 +288,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           seed: Annotated[int | None, typer.Option("--seed", help="Base seed of the repetitions.")] = None,
           profile: Annotated[str | None, typer.Option("--profile", help="FSM profile: paper or fast.")] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
+          pilot_option: PilotOptionOpt = None,
           shield: Annotated[str | None, typer.Option("--shield", help="off, geometry or depth (default: geometry).")]
           = None,
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
@@ -287,6 +300,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     from vlnpilot.bench.command import bench_command
     from vlnpilot.bench.results import RESULTS, ResultsLog
     from vlnpilot.exits import check_base_url, exit_code_for
+    from vlnpilot.pilots.options import parse_option_pairs
     from vlnpilot.safety import DEFAULT_SHIELD
 
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
@@ -295,7 +309,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=check_base_url(base_url), shield=shield or DEFAULT_SHIELD,
-                              episode_options=options)
+                              episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()))
     if report:
         from vlnpilot.report.html import write_bench_report
 

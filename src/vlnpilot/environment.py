@@ -1,21 +1,50 @@
-"""The Environment contract that the simulator and the real Tello both implement."""
+"""The Environment contract that the simulator and the real Tello both implement, and what each one declares.
+
+An environment says what it senses in `capabilities`; everything beyond the front camera is reached through a
+protocol that the capability promises (`GroundTruthSource` for `ground_truth`, `DepthSensing` for `depth`).
+Callers read the declaration (`capabilities_of`, `ground_truth_of`, `depth_sensing_of`), never probe methods.
+"""
 
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Protocol, runtime_checkable
+from typing import Protocol, cast, runtime_checkable
+
+import numpy as np
 
 from vlnpilot.commands import Command
 from vlnpilot.errors import ConfigError
 from vlnpilot.scene.model import Scene, Spawn
-from vlnpilot.types import Observation, Pose
+from vlnpilot.types import GroundTruth, MotionSampling, Observation, Pose
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What an environment can sense beyond the front camera: it declares each one it has (the simulator all,
+    a Tello none). Each `True` is a promise: `ground_truth` that it is a `GroundTruthSource`, `depth` that it
+    is a `DepthSensing`."""
+
+    ground_truth: bool = False  # privileged pose, rooms and geometry (oracle pilot, geometry shield, success judge)
+    depth: bool = False  # a front depth image (depth shield)
+    rear_view: bool = False  # the chase camera behind the drone
+    contact_sensing: bool = False  # whether `Observation.collided` is known
+
+    def to_dict(self) -> dict[str, bool]:
+        return asdict(self)
+
+
+# An environment that declares nothing is taken to sense nothing beyond the front camera and its pose: what is
+# not promised is never used, so a privileged pilot or a shield is refused before take-off with one clear line
+# instead of failing in flight, and no report claims a rear view or a contact sensor it never had.
+UNDECLARED = Capabilities()
 
 
 @runtime_checkable
 class Environment(Protocol):
-    """`capabilities` (a `Capabilities`, below) says what it senses; `capabilities_of` reads it, or infers it."""
+    """A drone in a scene that executes the command table and observes; `capabilities` says what else it offers."""
 
     scene: Scene
+    capabilities: Capabilities
 
     def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:
         """Start an episode at a spawn point (the drone is airborne at flight altitude afterwards)."""
@@ -24,30 +53,51 @@ class Environment(Protocol):
         """Execute one command of the table and observe."""
 
 
-@dataclass(frozen=True)
-class Capabilities:
-    """What an environment can sense beyond the front camera. The simulator has everything; a Tello none of it."""
+@runtime_checkable
+class GroundTruthSource(Protocol):
+    """An environment with `capabilities.ground_truth`: privileged facts, for monitors and privileged pilots."""
 
-    ground_truth: bool = True  # privileged pose, rooms and geometry (oracle pilot, geometry shield, success judge)
-    depth: bool = True  # a front depth image (depth shield)
-    rear_view: bool = True  # the chase camera behind the drone
-    contact_sensing: bool = True  # whether `Observation.collided` is known
+    def ground_truth(self) -> GroundTruth: ...
 
-    def to_dict(self) -> dict[str, bool]:
-        return asdict(self)
+
+@runtime_checkable
+class DepthSensing(MotionSampling, Protocol):
+    """An environment with `capabilities.depth`: what the depth shield needs, and no camera name.
+
+    `substeps` (from `MotionSampling`) is how the environment checks a motion, so that the shield samples a
+    superset of those poses; a drone that moves continuously says 1."""
+
+    front_fovy_deg: float  # vertical field of view of the front camera (the depth image's intrinsics, 4:3)
+
+    def front_depth(self, width: int, height: int) -> np.ndarray:
+        """The front camera's z-depth image (H x W, metres along the optical axis) at the current pose."""
 
 
 def capabilities_of(env: object) -> Capabilities:
-    """An environment's declared capabilities (`capabilities` attribute), else what its methods offer."""
+    """An environment's declared capabilities; `UNDECLARED` (nothing) if it declares none."""
     declared = getattr(env, "capabilities", None)
-    if isinstance(declared, Capabilities):
-        return declared
-    return Capabilities(ground_truth=hasattr(env, "ground_truth"), depth=hasattr(env, "render"))
+    return declared if isinstance(declared, Capabilities) else UNDECLARED
+
+
+def ground_truth_of(env: object) -> GroundTruth | None:
+    """The environment's ground truth if it declares one, else None."""
+    return cast(GroundTruthSource, env).ground_truth() if capabilities_of(env).ground_truth else None
+
+
+def depth_sensing_of(env: object) -> DepthSensing | None:
+    """The environment as a front depth sensor if it declares one, else None."""
+    return cast(DepthSensing, env) if capabilities_of(env).depth else None
+
+
+def usable_shields(caps: Capabilities) -> str:
+    """The shields an environment with `caps` can serve, for error messages."""
+    needs = {"off": True, "assist": True, "depth": caps.depth, "geometry": caps.ground_truth}
+    return ", ".join(name for name, served in needs.items() if served)
 
 
 def check_capabilities(caps: Capabilities, robot: str, *, shield: str, pilot: object) -> None:
     """Refuse, before anything flies, a shield or a pilot that needs what the environment cannot sense."""
-    usable = "off, assist" if not caps.depth else "off, assist, depth"
+    usable = usable_shields(caps)
     key = str(shield).strip().lower()
     if key == "geometry" and not caps.ground_truth:
         raise ConfigError(f"--shield geometry needs ground truth (the simulator's collision geometry), which the "

@@ -23,9 +23,9 @@ from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, context_preset
-from vlnpilot.environment import Environment
+from vlnpilot.environment import Environment, ground_truth_of
 from vlnpilot.episode_ask import PilotAsker, StepAnswer
-from vlnpilot.episode_measures import EpisodeEnd, EpisodeResult, EpisodeStart, Measures, StepFacts
+from vlnpilot.episode_measures import EpisodeEnd, EpisodeResult, EpisodeStart, Measures, StepFacts, result_type
 from vlnpilot.episode_record import EpisodeRecording, StepCallback, StepRecord
 from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
@@ -94,10 +94,11 @@ class LoopControl(Protocol):
 
 
 def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
-    gt = env.ground_truth() if hasattr(env, "ground_truth") else None
+    gt = ground_truth_of(env)  # only if the environment declares it (a real drone does not)
     if getattr(pilot, "privileged", False):
         if gt is None:
-            raise ConfigError(f"pilot {pilot.name!r} needs ground truth, which this environment does not provide")
+            raise ConfigError(f"pilot {pilot.name!r} needs ground truth, which this environment does not declare; "
+                              "use a model pilot")
         pilot.attach(gt)
     return gt
 
@@ -258,7 +259,7 @@ def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measure
             t_start: float) -> EpisodeResult:
     final_room = gt.room() if gt is not None else None
     judged_by = end.judged_by or ("ground_truth" if gt is not None else "none")
-    return EpisodeResult(outcome=end.outcome, reason=end.reason, steps=steps, final_state=state.value,
+    return result_type()(outcome=end.outcome, reason=end.reason, steps=steps, final_state=state.value,
                          final_room=final_room, contact=end.contact, judged_by=judged_by,
                          wall_time_s=round(time.perf_counter() - t_start, 3), **measured)
 

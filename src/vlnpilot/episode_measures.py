@@ -1,16 +1,28 @@
-"""What an episode counts: the measures and the `EpisodeResult` they fill.
+"""What an episode counts: the measures, and the `EpisodeResult` they lay out.
 
 A measure (habitat-lab's Measure) is a small object with `reset(start)`, `update(step)` once per step and
-`value(end)`, which returns the `EpisodeResult` fields it fills. `MEASURES` is the one list `run_episode`
-creates them from, so a new measure is a class here, a line in `MEASURES` and its field in `EpisodeResult`.
-The fields the episode decides itself (outcome, reason, steps, final state and room, contact, wall time, who
-judged) are `EPISODE_FIELDS`.
+`value(end)`, which returns the `EpisodeResult` fields it fills. It is also the one place that says what
+becomes of those fields downstream, as three class attributes:
+
+- `fields`: its `ResultField`s (name, type, default), in the order `result.to_dict()` writes them;
+- `aggregates`: how a bench combines a field over a pilot's episodes (`Total`, `Mean`), each a field of the
+  bench's `PilotSummary` (`bench/results.py` derives that class from them);
+- `columns`: its `Column`s in Table 4's summary per pilot (table.md, table.tex, summary.csv; `bench/tables.py`
+  places them by `rank` among the bench's own columns).
+
+`MEASURES` lists them, and, as `FilledByTheEpisode` entries, the fields the episode decides itself (outcome,
+reason, steps, final state and room, contact, wall time, who judged: `EPISODE_FIELDS`), each where the recorded
+format has it. So a new metric is a class here and a line at the end of `MEASURES`: `run_episode`, the result,
+the bench's summary and the tables follow, and its key comes after the existing ones in summary.json and
+results.jsonl, which stay as they were.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
-from typing import Any, Protocol
+import functools
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, make_dataclass
+from typing import Any, ClassVar, Protocol
 
 from vlnpilot.commands import Command
 from vlnpilot.decision import Usage
@@ -19,42 +31,103 @@ from vlnpilot.scene.model import Scene
 from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, shortest_path_length, spl
 from vlnpilot.types import Pose
 
+Result = dict[str, Any]  # one episode's result as recorded (`EpisodeResult.to_dict()`, a line of results.jsonl)
+
+
+class _Required:
+    def __repr__(self) -> str:
+        return "REQUIRED"
+
+
+REQUIRED: Any = _Required()  # the default of a field without one: every result must give it
+
 
 @dataclass(frozen=True)
-class EpisodeResult:
-    outcome: str
-    reason: str
-    steps: int
-    path_length_m: float
-    shortest_path_m: float
-    spl: float
-    collisions: int
-    invalid_decisions: int
-    oscillations: int
-    final_state: str
-    final_room: str | None
-    contact: str | None
-    input_tokens: int
-    cached_tokens: int
-    output_tokens: int
-    cost_usd: float
-    latency_s_total: float
-    pilot_calls: int
-    wall_time_s: float
-    interventions: int = 0  # commands changed by the safety layer (guard, door assist, shield)
-    oscillation_events: int = 0  # oscillation stretches the guard detected (also with the shield off)
-    shield: str = "off"
-    judged_by: str = "ground_truth"  # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
+class ResultField:
+    """One field of `EpisodeResult`: its name, its type, and its default (none: every result must give it)."""
+
+    name: str
+    type: Any
+    default: Any = REQUIRED
+
+
+@dataclass(frozen=True)
+class Total:
+    """A bench sums the field over a pilot's episodes (`PilotSummary.<field>`). `absent`: what a recorded
+    result without the field counts as (a field newer than the records); None: such a record is an error."""
+
+    field: str
+    type: type = int
+    absent: int | float | None = None
 
     @property
-    def success(self) -> bool:
-        return self.outcome == "success"
+    def name(self) -> str:
+        return self.field
 
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+    def over(self, results: Sequence[Result]) -> int | float:
+        return sum(self.type(self._value(r)) for r in results)
+
+    def _value(self, result: Result) -> Any:
+        if self.absent is None:
+            return result[self.field]
+        value = result.get(self.field)
+        return self.absent if value is None else value
 
 
-EPISODE_FIELDS = ("outcome", "reason", "steps", "final_state", "final_room", "contact", "wall_time_s", "judged_by")
+@dataclass(frozen=True)
+class Mean:
+    """A bench averages the field over a pilot's episodes (0 without episodes) into `PilotSummary.<name>`."""
+
+    field: str
+    name: str = ""  # default: the field's name
+
+    def __post_init__(self) -> None:
+        if not self.name:
+            object.__setattr__(self, "name", self.field)
+
+    @property
+    def type(self) -> type:
+        return float
+
+    def over(self, results: Sequence[Result]) -> float:
+        return (sum(float(r[self.field]) for r in results) / len(results)) if results else 0.0
+
+
+Aggregate = Total | Mean
+
+LAST = 1000  # the rank of a column that names none: after every other column
+
+
+@dataclass(frozen=True)
+class Column:
+    """One column of Table 4's summary per pilot, read from a `PilotSummary` (`s`).
+
+    `md` and `tex` are its headers in table.md and table.tex (None: not in that table), `csv` its headers in
+    summary.csv (one or more; none: not there). `text(s)` is its Markdown cell, and its LaTeX cell unless
+    `tex_text` says otherwise; `csv_cells(s)` gives one value per `csv` header. `rank` orders the columns, in
+    tens from Pilot (0) to Latency p95 (180), the bench's own (bench/tables.py) and the measures' (SPL 50,
+    Collisions 70, Invalid decisions 110 ... Pilot calls 160) interleaved; a new one takes a free rank where it
+    belongs, or `LAST`.
+    """
+
+    rank: int
+    md: str | None
+    tex: str | None
+    csv: tuple[str, ...]
+    text: Callable[[Any], str]
+    csv_cells: Callable[[Any], Sequence[Any]]
+    tex_text: Callable[[Any], str] | None = None
+
+    def tex_cell(self, summary: Any) -> str:
+        return (self.tex_text or self.text)(summary)
+
+
+def column(name: str, *, md: str | None, tex: str | None, fmt: str = "", csv_fmt: str | None = None,
+           rank: int = LAST) -> Column:
+    """A column that shows one `PilotSummary` field: as `fmt` in Markdown and LaTeX, `csv_fmt` (else `fmt`) in
+    summary.csv, under the header `name` there."""
+    return Column(rank, md, tex, (name,), lambda s: format(getattr(s, name), fmt),
+                  lambda s: (format(getattr(s, name), fmt if csv_fmt is None else csv_fmt),))
 
 
 @dataclass(frozen=True)
@@ -83,13 +156,21 @@ class EpisodeEnd:
 
 
 class Measure(Protocol):
+    fields: ClassVar[tuple[ResultField, ...]]
+    aggregates: ClassVar[tuple[Aggregate, ...]]
+    columns: ClassVar[tuple[Column, ...]]
+
     def reset(self, start: EpisodeStart) -> None: ...
     def update(self, step: StepFacts) -> None: ...
     def value(self, end: EpisodeEnd) -> dict[str, Any]: ...
 
 
 class PathAndSpl:
-    """Distance flown, the shortest path from the start, and SPL."""
+    """Distance flown, the shortest path from the start, and SPL (a bench averages it: Anderson et al. 2018)."""
+
+    fields = (ResultField("path_length_m", float), ResultField("shortest_path_m", float), ResultField("spl", float))
+    aggregates = (Mean("spl"),)
+    columns = (column("spl", md="SPL", tex="SPL", fmt=".3f", csv_fmt=".4f", rank=50),)
 
     def reset(self, start: EpisodeStart) -> None:
         self.path = PathLength()
@@ -109,6 +190,10 @@ class PathAndSpl:
 class OscillationCount:
     """Direction reversals of executed moves; `reversed` says whether the last step was one (it is recorded)."""
 
+    fields = (ResultField("oscillations", int),)
+    aggregates = (Total("oscillations"),)
+    columns = (column("oscillations", md="Oscillations", tex="Osc.", rank=120),)
+
     def reset(self, start: EpisodeStart) -> None:
         self.osc = Oscillations()
         self.osc.reset()
@@ -124,6 +209,10 @@ class OscillationCount:
 class InvalidDecisions:
     """Executed steps without a valid decision (the drone hovered)."""
 
+    fields = (ResultField("invalid_decisions", int),)
+    aggregates = (Total("invalid_decisions"),)
+    columns = (column("invalid_decisions", md="Invalid decisions", tex="Invalid", rank=110),)
+
     def reset(self, start: EpisodeStart) -> None:
         self.count = 0
 
@@ -134,8 +223,21 @@ class InvalidDecisions:
         return {"invalid_decisions": self.count}
 
 
+def _tokens(s: Any) -> str:
+    return f"{s.input_tokens}/{s.output_tokens}"
+
+
 class PilotUsage:
-    """Tokens, cost, latency and calls of every pilot call, re-asks and unexecuted steps included."""
+    """Tokens, cost, latency and calls of every pilot call, re-asks and unexecuted steps included. (The bench's
+    latency percentiles come from its workers' per-call timings, or from `latency_s_total` / `pilot_calls`.)"""
+
+    fields = (ResultField("input_tokens", int), ResultField("cached_tokens", int), ResultField("output_tokens", int),
+              ResultField("cost_usd", float), ResultField("latency_s_total", float), ResultField("pilot_calls", int))
+    aggregates = (Total("input_tokens"), Total("output_tokens"), Total("cost_usd", float), Total("pilot_calls"))
+    columns = (Column(140, "Tokens in/out", "Tokens in/out", ("input_tokens", "output_tokens"), _tokens,
+                      lambda s: (s.input_tokens, s.output_tokens)),
+               column("cost_usd", md="Cost (USD)", tex="Cost (\\$)", fmt=".4f", csv_fmt=".6f", rank=150),
+               column("pilot_calls", md=None, tex=None, rank=160))
 
     def reset(self, start: EpisodeStart) -> None:
         self.usage, self.calls = Usage(), 0
@@ -162,6 +264,10 @@ class _ReadAtTheEnd:
 
 
 class Collisions(_ReadAtTheEnd):
+    fields = (ResultField("collisions", int),)
+    aggregates = (Total("collisions"),)
+    columns = (column("collisions", md="Collisions", tex="Coll.", rank=70),)
+
     def value(self, end: EpisodeEnd) -> dict[str, Any]:
         return {"collisions": int(end.outcome == "collision")}
 
@@ -169,20 +275,97 @@ class Collisions(_ReadAtTheEnd):
 class SafetyCounts(_ReadAtTheEnd):
     """What the safety layer did: commands it changed, oscillation stretches its guard saw, its name."""
 
+    fields = (ResultField("interventions", int, 0),  # commands changed by the guard, the door assist, the shield
+              ResultField("oscillation_events", int, 0),  # oscillation stretches the guard saw (shield off too)
+              ResultField("shield", str, "off"))
+    aggregates = (Total("interventions", absent=0),)  # results recorded before the safety layer have none
+    columns = (column("interventions", md="Interventions", tex="Interv.", rank=130),)
+
     def value(self, end: EpisodeEnd) -> dict[str, Any]:
         s = end.safety
         return {"interventions": len(s.interventions), "oscillation_events": len(s.events), "shield": s.name}
 
 
-MEASURES: tuple[type[Measure], ...] = (PathAndSpl, OscillationCount, InvalidDecisions, PilotUsage, Collisions,
-                                       SafetyCounts)
+class FilledByTheEpisode:
+    """`EpisodeResult` fields the episode decides itself and passes to it; in `MEASURES` only to lay them out."""
+
+    aggregates: tuple[Aggregate, ...] = ()
+    columns: tuple[Column, ...] = ()
+
+    def __init__(self, *fields: ResultField):
+        self.fields = fields
+
+
+# `EpisodeResult`'s fields, in the order `to_dict()` writes them. A new measure goes at the end.
+MEASURES: tuple[type[Measure] | FilledByTheEpisode, ...] = (
+    FilledByTheEpisode(ResultField("outcome", str), ResultField("reason", str), ResultField("steps", int)),
+    PathAndSpl, Collisions, InvalidDecisions, OscillationCount,
+    FilledByTheEpisode(ResultField("final_state", str), ResultField("final_room", str | None),
+                       ResultField("contact", str | None)),
+    PilotUsage,
+    FilledByTheEpisode(ResultField("wall_time_s", float)),
+    SafetyCounts,
+    # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
+    FilledByTheEpisode(ResultField("judged_by", str, "ground_truth")),
+)
+
+
+def measure_classes() -> tuple[type[Measure], ...]:
+    """The measures in `MEASURES` (what `run_episode` resets, updates and reads)."""
+    return tuple(m for m in MEASURES if not isinstance(m, FilledByTheEpisode))
+
+
+def aggregates() -> tuple[Aggregate, ...]:
+    """How a bench aggregates the results, measure by measure (bench/results.py)."""
+    return tuple(a for m in MEASURES for a in m.aggregates)
+
+
+def columns() -> tuple[Column, ...]:
+    """The measures' columns in Table 4's summary per pilot (bench/tables.py)."""
+    return tuple(c for m in MEASURES for c in m.columns)
+
+
+class _ResultMethods:
+    @property
+    def success(self) -> bool:
+        return self.outcome == "success"  # type: ignore[attr-defined]
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)  # type: ignore[call-overload]
+
+
+_RESULT_DOC = """One episode's result: a frozen dataclass whose fields are laid out by `MEASURES` (`result_type`).
+
+Keyword-only, so `EpisodeResult(**result.to_dict())` rebuilds it from its recorded dict; `result.spl` and the
+other fields read as attributes; `to_dict()` keeps the field order, the order of the recorded keys."""
+
+
+@functools.cache
+def _result_class(layout: tuple[type[Measure] | FilledByTheEpisode, ...]) -> type:
+    spec = [(f.name, f.type) if f.default is REQUIRED else (f.name, f.type, field(default=f.default))
+            for entry in layout for f in entry.fields]
+    return make_dataclass("EpisodeResult", spec, bases=(_ResultMethods,), frozen=True, kw_only=True,
+                          namespace={"__module__": __name__, "__doc__": _RESULT_DOC})
+
+
+def result_type() -> type:
+    """The `EpisodeResult` class of the current `MEASURES` (one class per list, made once).
+
+    Derived rather than written out, so that a measure's fields are declared once, on the measure; looked up
+    when a result is made, so that a measure added to `MEASURES` (a test's, say) is in the results at once.
+    """
+    return _result_class(MEASURES)
+
+
+EpisodeResult = result_type()
+EPISODE_FIELDS = tuple(f.name for m in MEASURES if isinstance(m, FilledByTheEpisode) for f in m.fields)
 
 
 class Measures:
     """The episode's measures, made from `MEASURES`, updated together."""
 
     def __init__(self, start: EpisodeStart):
-        self.all: list[Measure] = [make() for make in MEASURES]
+        self.all: list[Measure] = [make() for make in measure_classes()]
         for measure in self.all:
             measure.reset(start)
 
@@ -199,3 +382,4 @@ class Measures:
         for measure in self.all:
             out.update(measure.value(end))
         return out
+

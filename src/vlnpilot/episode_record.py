@@ -1,7 +1,8 @@
 """What an episode writes: the run's header, one `StepRecord` per step, and the summary at the end.
 
 `StepRecord.to_dict` is the line of `episode.jsonl` (and what `on_step` receives); its keys and their order are
-the recorded format, read by `report/` and the replay pilot.
+the recorded format, read by `report/` and the replay pilot. They are written once, in the tables
+`ALWAYS_WRITTEN` and `WRITTEN_WHEN_SET` (key -> value), and listed, with `frames`, by `step_keys()`.
 """
 
 from __future__ import annotations
@@ -50,37 +51,53 @@ class StepRecord:
     confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
 
     def to_dict(self) -> dict[str, Any]:
-        d, obs, verdict = self.decision, self.obs, self.verdict
-        record: dict[str, Any] = {
-            "step": self.step,
-            "state": self.state.value,
-            "decision": d.core() if d else None,
-            "raw_text": d.raw_text if d else None,
-            "usage": d.usage.model_dump() if d else None,
-            "model": d.model if d else None,
-            "failures": self.failures,
-            "proposed": d.movement if d else None,
-            "executed": self.command.code if self.command else None,
-            "override": self.override,
-            "next_state": self.next_state.value if self.next_state else None,
-            "pose_before": self.pose_before.as_dict(),
-            "pose_after": obs.pose.as_dict(),
-            "collided": obs.collided,
-            "contact": obs.contact,
-            "contact_part": obs.contact_part,
-            "room_true": self.room_true,
-            "oscillation": self.oscillation,
-            "interventions": [i.to_dict() for i in verdict.interventions] if verdict else [],
-            "oscillation_event": verdict.oscillation.to_dict() if verdict and verdict.oscillation else None,
-            "safety_feedback": list(verdict.feedback) if verdict else [],
-        }
-        if self.confirmation is not None:  # only with confirm_final, so paper-context records are unchanged
-            record["confirmation"] = self.confirmation
-        if d is not None and d.model == HUMAN:  # a person flew this step from the live station
-            record["human"] = True
-        if obs.info:  # a real robot's facts: frame age, battery, safety events
-            record["robot"] = obs.info
+        record = {key: value(self) for key, value in ALWAYS_WRITTEN.items()}
+        for key, value in WRITTEN_WHEN_SET.items():
+            if (v := value(self)) is not None:
+                record[key] = v
         return record
+
+
+def _of_decision(read: Callable[[Decision], Any]) -> Callable[[StepRecord], Any]:
+    return lambda r: read(r.decision) if r.decision else None
+
+
+# The recorded format, one entry per key of an episode.jsonl line, in the order written: key -> its value.
+ALWAYS_WRITTEN: dict[str, Callable[[StepRecord], Any]] = {
+    "step": lambda r: r.step,
+    "state": lambda r: r.state.value,
+    "decision": _of_decision(Decision.core),
+    "raw_text": _of_decision(lambda d: d.raw_text),
+    "usage": _of_decision(lambda d: d.usage.model_dump()),
+    "model": _of_decision(lambda d: d.model),
+    "failures": lambda r: r.failures,
+    "proposed": _of_decision(lambda d: d.movement),
+    "executed": lambda r: r.command.code if r.command else None,
+    "override": lambda r: r.override,
+    "next_state": lambda r: r.next_state.value if r.next_state else None,
+    "pose_before": lambda r: r.pose_before.as_dict(),
+    "pose_after": lambda r: r.obs.pose.as_dict(),
+    "collided": lambda r: r.obs.collided,
+    "contact": lambda r: r.obs.contact,
+    "contact_part": lambda r: r.obs.contact_part,
+    "room_true": lambda r: r.room_true,
+    "oscillation": lambda r: r.oscillation,
+    "interventions": lambda r: [i.to_dict() for i in r.verdict.interventions] if r.verdict else [],
+    "oscillation_event": lambda r: r.verdict.oscillation.to_dict() if r.verdict and r.verdict.oscillation else None,
+    "safety_feedback": lambda r: list(r.verdict.feedback) if r.verdict else [],
+}
+# Written only when set (not None), so that the records of runs without them are unchanged.
+WRITTEN_WHEN_SET: dict[str, Callable[[StepRecord], Any]] = {
+    "confirmation": lambda r: r.confirmation,  # the exchange before a final state (confirm_final)
+    "human": lambda r: True if r.decision is not None and r.decision.model == HUMAN else None,  # the live station
+    "robot": lambda r: r.obs.info or None,  # a real robot's facts: frame age, battery, safety events
+}
+FRAMES = "frames"  # added by `EpisodeRecording.step` when the run is recorded: the step's frame files
+
+
+def step_keys() -> tuple[str, ...]:
+    """Every key an episode.jsonl line may have (what `report/` reads back)."""
+    return (*ALWAYS_WRITTEN, *WRITTEN_WHEN_SET, FRAMES)
 
 
 class EpisodeRecording:
@@ -112,7 +129,7 @@ class EpisodeRecording:
     def step(self, record: StepRecord) -> None:
         line = record.to_dict()
         if self.recorder is not None:
-            line["frames"] = self.recorder.save_observation(record.step, record.obs.front_rgb, record.obs.rear_rgb)
+            line[FRAMES] = self.recorder.save_observation(record.step, record.obs.front_rgb, record.obs.rear_rgb)
             self.recorder.step(line)
         if self.on_step is not None:
             self.on_step(line)

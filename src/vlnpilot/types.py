@@ -92,8 +92,18 @@ class Observation:
 
 
 @runtime_checkable
-class GroundTruth(Protocol):
-    """Privileged facts about the world, for monitors and privileged pilots only (never model pilots)."""
+class MotionSampling(Protocol):
+    """How an environment checks a motion for contact, so that a shield can predict exactly what it will do."""
+
+    def substeps(self, motion: Motion) -> int:
+        """At how many evenly spaced poses (at i/n, i = 1..n) a motion is checked; 1: only where it ends."""
+
+
+@runtime_checkable
+class GroundTruth(MotionSampling, Protocol):
+    """Privileged facts about the world, for monitors and privileged pilots only (never model pilots).
+
+    `clearance_at` and `substeps` are the collision geometry that the geometry shield queries."""
 
     @property
     def scene(self) -> Scene: ...
@@ -108,3 +118,7 @@ class GroundTruth(Protocol):
 
     def target_visible(self, target_id: str) -> bool:
         """Whether the target occupies enough pixels of the front camera (segmentation render)."""
+
+    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
+        """(distance, scene part, drone part) of the nearest geometry within `max_distance` of the drone at
+        `pose` (negative when penetrating), else None."""

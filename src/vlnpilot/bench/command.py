@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from vlnpilot.bench.executors import BenchError
-from vlnpilot.bench.runner import BenchReport, BenchSettings, parse_pilots, run_bench
+from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 
 
 def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "oracle", reps: int | None = None,
@@ -15,7 +15,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
                   ray_address: str | None = None, out: str | Path | None = None, resume: bool = False,
                   seed: int | None = None, profile: str | None = None, base_url: str | None = None,
                   progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
-                  render: bool = True,
+                  render: bool = True, pilot_options: Mapping[str, str] | None = None,
                   plugins: Sequence[str] = (), console: Any = None) -> Path:
     """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
 
@@ -23,8 +23,10 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     profile override the suite's. `workers`: episodes in flight (default: the number of cores; go above it
     for model pilots). `executor`: local | ray | inline. `shield`: off | geometry | depth (None: off, the
     paper's behaviour). `episode_options`: further EpisodeConfig fields (e.g. {'overlay': 'corridor'}); all of
-    them enter the config hash. Raises BenchError (a VLNPilotError) when episodes
-    failed, after recording every finished one: rerun with resume=True to fly only the missing ones.
+    them enter the config hash. `pilot_options`: {option: value string} (`--pilot-option`), coerced by each
+    pilot's options class and given to every pilot that takes the option; recorded with the pilot (and hashed).
+    Raises BenchError (a VLNPilotError) when episodes failed, after recording every finished one: rerun with
+    resume=True to fly only the missing ones.
     """
     if console is None:
         from rich.console import Console
@@ -37,8 +39,9 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
             raise BenchError("--resume needs --out: the bench directory to resume")
         out = default_run_dir("runs", f"bench-{Path(str(suite)).stem}")
     settings = BenchSettings(
-        suite=suite, pilots=parse_pilots(pilots), out=out, reps=reps, max_steps=max_steps, seed=seed,
-        profile=profile, base_url=base_url, executor=executor,
+        suite=suite, pilots=pilots if isinstance(pilots, str) else tuple(pilots), out=out, reps=reps,
+        max_steps=max_steps, seed=seed,
+        profile=profile, base_url=base_url, pilot_options=dict(pilot_options or {}), executor=executor,
         episode_options={"shield": str(shield or "off").lower(), **(episode_options or {})},
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render,
         plugins=tuple(plugins), progress=progress)

@@ -1,7 +1,10 @@
-"""Where episodes run: in this thread (`inline`), in local worker processes (`local`), or on Ray (`ray`).
+"""Where episodes run: the `Executor` protocol, its registry, and the built-in executors.
 
-Every executor runs the same function, `execute_spec(spec, simulators)`, and reports the same events
-(started / finished / failed) to the parent, which alone writes `results.jsonl`.
+`inline` runs episodes in this thread, `local` in worker processes on this machine, `ray` on a Ray cluster
+(ray_executor.py). Every executor runs the same function, `episode_job.run_guarded(spec, simulators)`, and
+reports the same events (started / finished / failed) to the parent, which alone writes `results.jsonl`.
+A new executor is a class with `describe`, `run(specs)` and `close()`, and a factory registered with
+`@register_executor("NAME")`.
 
 Local executor: `workers` is the number of episodes in flight. It starts min(workers, cores) processes
 (spawn context: no MuJoCo or OpenGL state is ever inherited through fork) and splits the episodes in flight
@@ -15,190 +18,79 @@ parent watchdog), so a killed bench leaves no orphan writing into its run direct
 from __future__ import annotations
 
 import contextlib
-import importlib
 import multiprocessing as mp
 import os
 import queue
-import shutil
 import signal
 import socket
 import sys
 import threading
 import time
-import traceback
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any, Literal
+from collections.abc import Callable, Iterator, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
 
+from vlnpilot.bench.episode_job import EpisodeSpec, Event, SimulatorCache, import_plugins, run_guarded
 from vlnpilot.errors import ConfigError, VLNPilotError
-
-EXECUTORS = ("local", "ray", "inline")
 
 
 class BenchError(VLNPilotError):
     """A bench that cannot start or complete; the message says what to do (often: --resume)."""
 
 
-@dataclass(frozen=True)
-class EpisodeSpec:
-    """Everything a worker needs to fly and record one episode; plain data, picklable."""
+class Executor(Protocol):
+    """Runs episodes somewhere and reports them as events, in any order; the parent records them."""
 
-    key: str
-    pilot: str  # the SPEC, e.g. 'openai:gpt-4.1'
-    row: str
-    rep: int
-    seed: int
-    scene: str
-    spawn: str
-    query: str
-    goal_room: str
-    goal_target: str | None
-    max_steps: int
-    profile: str
-    run_dir: str  # absolute: where the worker writes
-    run_dir_rel: str  # relative to the bench directory: what results.jsonl records
-    pilot_options: dict[str, Any] = field(default_factory=dict)
-    episode_options: dict[str, Any] = field(default_factory=dict)  # extra EpisodeConfig fields (e.g. a shield)
-    render: bool = True
-    save_frames: bool = True
-    spawn_jitter_m: float = 0.0
-    spawn_jitter_deg: float = 0.0
+    describe: str  # one line for the console: where and how many in flight
+
+    def run(self, specs: Sequence[EpisodeSpec]) -> Iterator[Event]:
+        """Yield `started` and then `finished` or `failed` for every spec (a generator the parent may close)."""
+
+    def close(self) -> None:
+        """Release what the executor holds (a Ray runtime it started); called once, after `run`."""
 
 
 @dataclass(frozen=True)
-class Event:
-    kind: Literal["started", "finished", "failed"]
-    key: str
-    record: dict[str, Any] | None = None
-    error: str | None = None
-    worker: str | None = None
+class ExecutorOptions:
+    workers: int | None = None  # episodes in flight; None: the executor's default (the cores it has)
+    ray_address: str | None = None
+    plugins: tuple[str, ...] = ()  # modules every worker imports (custom pilots registered by name)
 
 
-# ---------------------------------------------------------------------------------------------- worker side
-class SimulatorCache:
-    """One Simulator per (thread, scene, settings), built on first use and reused for every later episode."""
-
-    def __init__(self, per_thread: int = 4) -> None:
-        self.per_thread = per_thread  # simulators kept per thread (each holds a model and GL renderers)
-        self._local = threading.local()
-        self._all: list[Any] = []
-        self._lock = threading.Lock()
-
-    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float) -> Any:
-        from vlnpilot.sim import SimConfig, Simulator
-
-        sims = getattr(self._local, "sims", None)
-        if sims is None:
-            sims = self._local.sims = {}
-        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg))
-        if key not in sims:
-            if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
-                self._close(sims.pop(next(iter(sims))))
-            sims[key] = Simulator(scene, key[1])
-            with self._lock:
-                self._all.append(sims[key])
-        sims[key] = sims.pop(key)  # most recently used last
-        return sims[key]
-
-    def _close(self, sim: Any) -> None:
-        with contextlib.suppress(Exception):
-            sim.close()
-        with self._lock:
-            if sim in self._all:
-                self._all.remove(sim)
-
-    def close_thread(self) -> None:
-        """Close this thread's simulators (their GL contexts must be released by the thread that owns them)."""
-        for sim in (getattr(self._local, "sims", None) or {}).values():
-            with contextlib.suppress(Exception):
-                sim.close()
-            with self._lock:
-                if sim in self._all:
-                    self._all.remove(sim)
-        self._local.sims = {}
+ExecutorFactory = Callable[[ExecutorOptions], Executor]
+_EXECUTORS: dict[str, ExecutorFactory] = {}
 
 
-class TimedPilot:
-    """Wraps a pilot to time every call (including failed ones); delegates everything else."""
+def register_executor(name: str) -> Callable[[ExecutorFactory], ExecutorFactory]:
+    """Register an executor factory (ExecutorOptions -> Executor) under a name."""
 
-    def __init__(self, pilot: Any):
-        self._pilot = pilot
-        self.latencies: list[float] = []
+    def deco(factory: ExecutorFactory) -> ExecutorFactory:
+        _EXECUTORS[name] = factory
+        return factory
 
-    def decide(self, pilot_input: Any) -> Any:
-        t0 = time.perf_counter()
-        try:
-            return self._pilot.decide(pilot_input)
-        finally:
-            self.latencies.append(round(time.perf_counter() - t0, 4))
-
-    def __getattr__(self, name: str) -> Any:  # name, model, privileged, attach, ...
-        return getattr(self._pilot, name)
+    return deco
 
 
-def import_plugins(plugins: Sequence[str]) -> None:
-    """Import modules that register extra pilots (`@register_pilot`), in a worker or in the parent."""
-    for module in plugins:
-        try:
-            importlib.import_module(module)
-        except ImportError as exc:
-            raise ConfigError(f"cannot import pilot plugin module {module!r}: {exc}") from None
+def executor_names() -> tuple[str, ...]:
+    return tuple(_EXECUTORS)
 
 
-def _pilot_options(spec: EpisodeSpec) -> dict[str, Any]:
-    """The spec's pilot options, plus the row id for pilots that fly one recording per row (replay of trials)."""
-    from vlnpilot.pilots.base import parse_spec, pilot_factory
-
-    wants_row = getattr(pilot_factory(parse_spec(spec.pilot)[0]), "wants_row", False)
-    return {**spec.pilot_options, "row": spec.row} if wants_row else dict(spec.pilot_options)
-
-
-def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any]:
-    """Fly and record one episode; the results.jsonl record (without the parent's fields)."""
-    from vlnpilot.episode import EpisodeConfig, run_episode
-    from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.prompting import prompt_hash
-    from vlnpilot.record import Recorder, git_sha
-    from vlnpilot.tasks import Task
-
-    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg)
-    pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
-    run_dir = Path(spec.run_dir)
-    if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
-        shutil.rmtree(run_dir)
-    recorder = Recorder(run_dir, save_frames=spec.save_frames and spec.render)
-    config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
-    task = Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target)
-    try:
-        result = run_episode(sim, pilot, task, config, spawn=spec.spawn, recorder=recorder, pilot_spec=spec.pilot)
-    finally:
-        recorder.close()
-        close = getattr(pilot._pilot, "close", None)
-        if callable(close):
-            with contextlib.suppress(Exception):
-                close()
-    return {
-        "key": spec.key, "pilot": spec.pilot, "model": pilot.model, "row": spec.row, "rep": spec.rep,
-        "seed": spec.seed, "spawn": spec.spawn, "query": spec.query, "goal_room": spec.goal_room,
-        "goal_target": spec.goal_target, "result": result.to_dict(), "call_latencies_s": pilot.latencies,
-        "run_dir": spec.run_dir_rel,
-        "provenance": {"prompt_hash": prompt_hash(spec.profile), "git_sha": git_sha(),
-                       "worker": f"{socket.gethostname()}:{os.getpid()}"},
-    }
+def executor_factory(name: str) -> ExecutorFactory:
+    """The registered factory of an executor name; a bad name lists the known ones (before anything runs)."""
+    if name not in _EXECUTORS:
+        raise ConfigError(f"unknown executor {name!r}; valid executors: {', '.join(_EXECUTORS)}")
+    return _EXECUTORS[name]
 
 
-def _run_guarded(spec: EpisodeSpec, simulators: SimulatorCache) -> tuple[dict[str, Any] | None, str | None]:
-    try:
-        return execute_spec(spec, simulators), None
-    except VLNPilotError as exc:
-        return None, f"{type(exc).__name__}: {exc}"
-    except Exception as exc:  # noqa: BLE001 - reported to the parent, which keeps the key for --resume
-        tb = traceback.format_exception(type(exc), exc, exc.__traceback__)
-        return None, f"{type(exc).__name__}: {exc}\n" + "".join(tb[-6:])
+def make_executor(name: str, *, workers: int | None = None, ray_address: str | None = None,
+                  plugins: Sequence[str] = ()) -> Executor:
+    """An executor by name (local, ray, inline, or a registered one); a bad name lists the known ones."""
+    factory = executor_factory(name)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int) or workers < 1):
+        raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
+    return factory(ExecutorOptions(workers, ray_address, tuple(plugins)))
 
 
-# ------------------------------------------------------------------------------------------------- executors
 class InlineExecutor:
     """Runs the episodes one after another in the calling thread (debugging, tests, a single episode)."""
 
@@ -213,10 +105,13 @@ class InlineExecutor:
         try:
             for spec in specs:
                 yield Event("started", spec.key, worker="inline")
-                record, error = _run_guarded(spec, sims)
+                record, error = run_guarded(spec, sims)
                 yield Event("finished" if error is None else "failed", spec.key, record, error, "inline")
         finally:
             sims.close_thread()
+
+    def close(self) -> None:
+        """Nothing outlives `run`: its simulators are closed when it ends."""
 
 
 def default_workers() -> int:
@@ -275,7 +170,7 @@ def _worker_main(tasks: Any, events: Any, threads: int, parent_pid: int, plugins
                 if spec is None:
                     return
                 events.put(("started", spec.key, None, None, name))
-                record, error = _run_guarded(spec, sims)
+                record, error = run_guarded(spec, sims)
                 events.put(("finished" if error is None else "failed", spec.key, record, error, name))
         finally:
             sims.close_thread()
@@ -360,95 +255,25 @@ class LocalExecutor:
                 q.cancel_join_thread()
                 q.close()
 
-
-class RayExecutor:
-    """The same episodes as Ray actor calls: min(workers, cluster CPUs) actors, each with a few threads."""
-
-    name = "ray"
-
-    def __init__(self, workers: int | None = None, address: str | None = None, plugins: Sequence[str] = ()):
-        try:
-            import ray
-        except ImportError:
-            raise BenchError("the ray executor needs Ray: pip install 'vln-pilot[ray]' (or pip install ray)") from None
-        self._ray = ray
-        self._owns = not ray.is_initialized()
-        if self._owns:
-            try:
-                ray.init(address=address, include_dashboard=False, ignore_reinit_error=True, log_to_driver=False)
-            except Exception as exc:  # noqa: BLE001 - connection errors come in many types
-                raise BenchError(f"cannot start or reach Ray (address={address or 'local'}): {exc}") from None
-        cpus = max(1, int(ray.cluster_resources().get("CPU", 1)))
-        self.workers = workers or cpus
-        self.plan = split_workers(self.workers, cpus)
-        self.plugins = tuple(plugins)
-        self.describe = (f"ray ({address or 'local'}): {self.workers} in flight = {len(self.plan)} actor(s) "
-                         f"on {cpus} CPU(s)")
-
-    def run(self, specs: Sequence[EpisodeSpec]) -> Iterator[Event]:
-        if not specs:
-            return
-        ray = self._ray
-        plan = split_workers(min(self.workers, len(specs)), len(self.plan))
-        actor_cls = ray.remote(num_cpus=1)(_RayWorker)
-        actors = [actor_cls.options(max_concurrency=n).remote(list(self.plugins)) for n in plan]
-        free = [n for n in plan]
-        todo = list(reversed(specs))
-        inflight: dict[Any, tuple[int, str]] = {}
-        try:
-            while todo or inflight:
-                for i, actor in enumerate(actors):
-                    while free[i] > 0 and todo:
-                        spec = todo.pop()
-                        inflight[actor.run.remote(spec)] = (i, spec.key)
-                        free[i] -= 1
-                        yield Event("started", spec.key, worker=f"ray-actor-{i}")
-                done, _ = ray.wait(list(inflight), num_returns=1)
-                for ref in done:
-                    i, key = inflight.pop(ref)
-                    free[i] += 1
-                    try:
-                        record, error, worker = ray.get(ref)
-                    except Exception as exc:  # noqa: BLE001 - actor died, node lost, ...
-                        record, error, worker = None, f"ray: {type(exc).__name__}: {exc}", f"ray-actor-{i}"
-                    yield Event("finished" if error is None else "failed", key, record, error, worker)
-        finally:
-            for ref in inflight:
-                with contextlib.suppress(Exception):
-                    ray.cancel(ref, force=True)
-            for actor in actors:
-                with contextlib.suppress(Exception):
-                    ray.kill(actor)
-
     def close(self) -> None:
-        if self._owns:
-            with contextlib.suppress(Exception):
-                self._ray.shutdown()
+        """Nothing outlives `run`: its worker processes are stopped when it ends."""
 
 
-class _RayWorker:
-    """A Ray actor: per-thread simulators (threaded actor, `max_concurrency` threads), reused across calls."""
-
-    def __init__(self, plugins: list[str]):
-        import_plugins(plugins)
-        self.sims = SimulatorCache()
-        self.name = f"{socket.gethostname()}:{os.getpid()}"
-
-    def run(self, spec: EpisodeSpec) -> tuple[dict[str, Any] | None, str | None, str]:
-        record, error = _run_guarded(spec, self.sims)
-        return record, error, self.name
+@register_executor("local")
+def _local(options: ExecutorOptions) -> Executor:
+    return LocalExecutor(options.workers, options.plugins)
 
 
-def make_executor(name: str, *, workers: int | None = None, ray_address: str | None = None,
-                  plugins: Sequence[str] = ()) -> Any:
-    """An executor by name: local, ray or inline; a bad name lists the known ones."""
-    if workers is not None and (not isinstance(workers, int) or workers < 1):
-        raise ConfigError(f"--workers must be a positive integer, got {workers!r}")
-    if name == "local":
-        return LocalExecutor(workers, plugins)
-    if name == "ray":
-        return RayExecutor(workers, ray_address, plugins)
-    if name == "inline":
-        return InlineExecutor(plugins)
-    raise ConfigError(f"unknown executor {name!r}; valid executors: {', '.join(EXECUTORS)}")
+@register_executor("ray")
+def _ray(options: ExecutorOptions) -> Executor:
+    from vlnpilot.bench.ray_executor import RayExecutor  # Ray is optional: imported only when asked for
 
+    return RayExecutor(options.workers, options.ray_address, options.plugins)
+
+
+@register_executor("inline")
+def _inline(options: ExecutorOptions) -> Executor:
+    return InlineExecutor(options.plugins)
+
+
+EXECUTORS = executor_names()  # the built-in ones, in the order the errors list them

@@ -71,8 +71,8 @@ def _scene_or_none(name: str) -> Any | None:
 
 def load_bench(bench_dir: str | Path) -> BenchData:
     """Read a bench directory (bench.json and results.jsonl, through the bench package's own readers)."""
+    from vlnpilot.bench.manifest import read_manifest
     from vlnpilot.bench.results import ResultsLog
-    from vlnpilot.bench.runner import read_manifest
     from vlnpilot.bench.suite import suite_from_dict
 
     bench_dir = Path(bench_dir)

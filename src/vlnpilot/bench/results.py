@@ -7,13 +7,17 @@ first line of any key seen twice; `ResultsLog.open_for_append` cuts a torn tail 
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, make_dataclass
 from pathlib import Path
 from typing import Any
+
+from vlnpilot import episode_measures
+from vlnpilot.episode_measures import Aggregate, Mean
 
 RESULTS = "results.jsonl"
 Z95 = 1.959963984540054  # two-sided 95% normal quantile
@@ -141,35 +145,39 @@ class CellStats:
     steps_exceeded: int
 
 
-@dataclass(frozen=True)
-class PilotSummary:
-    """The per-pilot summary under the table."""
-
-    pilot: str
-    models: tuple[str, ...]
-    episodes: int
-    successes: int
-    ci_low: float
-    ci_high: float
-    spl: float
-    mean_steps: float
-    collisions: int
-    steps_exceeded: int
-    false_successes: int
-    pilot_errors: int
-    invalid_decisions: int
-    oscillations: int
-    interventions: int  # commands changed by the safety layer (0 with the shield off)
-    input_tokens: int
-    output_tokens: int
-    cost_usd: float
-    pilot_calls: int
-    latency_p50_s: float | None
-    latency_p95_s: float | None
-
+class _Rates:
     @property
     def success_rate(self) -> float:
-        return self.successes / self.episodes if self.episodes else 0.0
+        return self.successes / self.episodes if self.episodes else 0.0  # type: ignore[attr-defined]
+
+
+# The summary's own fields (the measures' aggregates follow): from the outcomes, the steps and the call timings.
+_OWN_FIELDS: tuple[tuple[str, Any], ...] = (
+    ("pilot", str), ("models", tuple[str, ...]), ("episodes", int), ("successes", int), ("ci_low", float),
+    ("ci_high", float), ("mean_steps", float), ("steps_exceeded", int), ("false_successes", int),
+    ("pilot_errors", int), ("latency_p50_s", float | None), ("latency_p95_s", float | None))
+_MEAN_STEPS = Mean("steps", "mean_steps")
+
+
+_SUMMARY_DOC = """The per-pilot summary under the table: the bench's own statistics (success, its Wilson interval,
+mean steps, outcome counts, call latency) and one field per aggregate of the measures
+(`episode_measures.aggregates()`: SPL, collisions, invalid decisions, oscillations, interventions, tokens, cost,
+pilot calls, and whatever a new measure adds). Keyword-only and frozen, like `EpisodeResult`."""
+
+
+@functools.cache
+def _summary_class(aggregates: tuple[Aggregate, ...]) -> type:
+    spec = [*_OWN_FIELDS, *((a.name, a.type) for a in aggregates)]
+    return make_dataclass("PilotSummary", spec, bases=(_Rates,), frozen=True, kw_only=True,
+                          namespace={"__module__": __name__, "__doc__": _SUMMARY_DOC})
+
+
+def summary_type() -> type:
+    """The `PilotSummary` class of the current measures (one class per set of aggregates, made once)."""
+    return _summary_class(episode_measures.aggregates())
+
+
+PilotSummary = summary_type()
 
 
 def cell_stats(records: Iterable[dict[str, Any]]) -> CellStats:
@@ -189,23 +197,16 @@ def call_latencies(record: dict[str, Any]) -> list[float]:
 
 
 def summarize(pilot: str, records: Sequence[dict[str, Any]]) -> PilotSummary:
-    """Aggregate one pilot's episodes: SPL is the mean of the per-episode SPL (Anderson et al. 2018)."""
+    """Aggregate one pilot's episodes into a `PilotSummary` (SPL: the mean of the per-episode SPL)."""
     res = [r["result"] for r in records]
     n = len(res)
     outcomes = [x["outcome"] for x in res]
     k = outcomes.count("success")
     lo, hi = wilson_interval(k, n)
     lat = [x for r in records for x in call_latencies(r)]
-    return PilotSummary(
+    measured = {a.name: a.over(res) for a in episode_measures.aggregates()}
+    return summary_type()(
         pilot=pilot, models=tuple(sorted({str(r.get("model")) for r in records})), episodes=n, successes=k,
-        ci_low=lo, ci_high=hi, spl=(sum(float(x["spl"]) for x in res) / n) if n else 0.0,
-        mean_steps=(sum(int(x["steps"]) for x in res) / n) if n else 0.0,
-        collisions=sum(int(x["collisions"]) for x in res), steps_exceeded=outcomes.count("max_steps"),
+        ci_low=lo, ci_high=hi, mean_steps=_MEAN_STEPS.over(res), steps_exceeded=outcomes.count("max_steps"),
         false_successes=outcomes.count("false_success"), pilot_errors=outcomes.count("pilot_error"),
-        invalid_decisions=sum(int(x["invalid_decisions"]) for x in res),
-        oscillations=sum(int(x["oscillations"]) for x in res),
-        interventions=sum(int(x.get("interventions") or 0) for x in res),
-        input_tokens=sum(int(x["input_tokens"]) for x in res), output_tokens=sum(int(x["output_tokens"]) for x in res),
-        cost_usd=sum(float(x["cost_usd"]) for x in res), pilot_calls=sum(int(x["pilot_calls"]) for x in res),
-        latency_p50_s=percentile(lat, 50), latency_p95_s=percentile(lat, 95),
-    )
+        latency_p50_s=percentile(lat, 50), latency_p95_s=percentile(lat, 95), **measured)

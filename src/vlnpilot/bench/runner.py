@@ -16,33 +16,24 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
-import os
 import re
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.bench.executors import (
-    BenchError,
-    EpisodeSpec,
-    Event,
-    default_workers,
-    import_plugins,
-    make_executor,
-)
+from vlnpilot.bench.episode_job import EpisodeSpec, Event, import_plugins
+from vlnpilot.bench.executors import BenchError, default_workers, executor_factory, make_executor
+from vlnpilot.bench.manifest import FORMAT, MANIFEST, BenchManifest, bench_lock, read_manifest
 from vlnpilot.bench.results import RESULTS, PilotSummary, ResultsLog, episode_key, record_key, summarize
 from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dict
 from vlnpilot.bench.tables import render_tables
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fileio import write_atomic
 from vlnpilot.fsm import PROFILES
-from vlnpilot.record import check_writable, default_run_dir, git_sha, package_versions, write_json_atomic
+from vlnpilot.record import check_writable, default_run_dir, git_sha, package_versions
 
-MANIFEST = "bench.json"
-LOCK = ".bench.lock"
-FORMAT = "vln-pilot-bench/1"
 _FAIL_FAST = 3  # abort when this many episodes failed before any finished: something systemic is wrong
 
 
@@ -51,13 +42,14 @@ class BenchSettings:
     """One bench invocation. None means: the suite's value (reps, max_steps, seed, profile) or the default."""
 
     suite: str | Path = "paper"
-    pilots: tuple[str, ...] = ("oracle",)
+    pilots: str | tuple[str, ...] = ("oracle",)  # SPECs, or 'oracle, openai:gpt-4.1': parsed once, by run_bench
     out: str | Path | None = None
     reps: int | None = None
     max_steps: int | None = None
     seed: int | None = None
     profile: str | None = None
     base_url: str | None = None  # given to every pilot that takes one (OpenAI-compatible servers, ...)
+    pilot_options: dict[str, str] = field(default_factory=dict)  # --pilot-option KEY=VALUE, to the pilots taking KEY
     episode_options: dict[str, Any] = field(default_factory=dict)  # extra EpisodeConfig fields, e.g. a shield
     executor: str = "local"
     workers: int | None = None  # episodes in flight; default: the number of cores
@@ -115,30 +107,43 @@ def _pilot_dir(spec: str) -> str:
 
 
 def _accepts(spec: str, option: str) -> bool:
-    """Whether the pilot's factory takes a keyword option (e.g. base_url); imports only that pilot's module."""
-    import inspect
-
-    from vlnpilot.errors import UnknownNameError
-    from vlnpilot.pilots.base import parse_spec, pilot_factory
+    """Whether the pilot's options class has an option (e.g. base_url); imports only that pilot's module."""
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
 
     try:
-        factory = pilot_factory(parse_spec(spec)[0])
+        return pilot_options_class(parse_spec(spec)[0]).accepts(option)
     except UnknownNameError:
         return False  # make_pilot raises the error that lists the known pilots
-    try:
-        params = inspect.signature(factory).parameters
-    except (TypeError, ValueError):
-        return False
-    return option in params
 
 
-def resolve_pilots(specs: Sequence[str], base_url: str | None) -> list[PilotEntry]:
+def _command_line_options(specs: Sequence[str], pairs: Mapping[str, str]) -> dict[str, dict[str, Any]]:
+    """Each pilot's share of the `--pilot-option` pairs (those its options class takes), coerced by that class.
+
+    Like base_url, an option goes to every pilot that takes it; one that no pilot takes is refused.
+    """
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
+
+    classes = {spec: pilot_options_class(parse_spec(spec)[0]) for spec in specs}
+    valid = sorted({key for cls in classes.values() for key in cls.settable()})
+    for key in pairs:
+        if key not in valid:
+            raise ConfigError(f"--pilot-option {key!r} is taken by none of the pilots {', '.join(specs)}; "
+                              f"valid keys: {', '.join(valid) or '(none)'}")
+    return {spec: cls.from_command_line(parse_spec(spec)[0], {k: v for k, v in pairs.items() if k in cls.settable()})
+            for spec, cls in classes.items()}
+
+
+def resolve_pilots(specs: Sequence[str], base_url: str | None,
+                   pilot_options: Mapping[str, str] | None = None) -> list[PilotEntry]:
     """Build each pilot once in the parent: unknown names, bad models or missing keys fail before anything runs."""
     from vlnpilot.pilots.base import make_pilot
 
+    given = _command_line_options(specs, pilot_options) if pilot_options else {}
     out, dirs = [], set()
     for spec in specs:
-        options = {"base_url": base_url} if base_url and _accepts(spec, "base_url") else {}
+        options = dict(given.get(spec, {}))
+        if base_url and _accepts(spec, "base_url"):
+            options["base_url"] = base_url
         pilot = make_pilot(spec, **options)
         close = getattr(pilot, "close", None)
         if callable(close):
@@ -204,54 +209,7 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
     return specs
 
 
-# ------------------------------------------------------------------------------------------ manifest, lock
-def read_manifest(out: str | Path) -> dict[str, Any] | None:
-    path = Path(out) / MANIFEST
-    if not path.is_file():
-        return None
-    try:
-        return json.loads(path.read_text())
-    except ValueError as exc:
-        raise BenchError(f"{path} is not valid JSON ({exc}); not a bench directory") from None
-
-
-def _differences(old: dict[str, Any], new: dict[str, Any]) -> list[str]:
-    out = []
-    for k in sorted(set(old) | set(new)):
-        if old.get(k) == new.get(k):
-            continue
-        if k == "suite" and isinstance(old.get(k), dict) and isinstance(new.get(k), dict):
-            out += [f"suite {sub}" for sub in sorted(set(old[k]) | set(new[k])) if old[k].get(sub) != new[k].get(sub)]
-        else:
-            out.append(f"{k}: recorded {json.dumps(old.get(k))}, now {json.dumps(new.get(k))}")
-    return out
-
-
-@contextlib.contextmanager
-def _bench_lock(out: Path) -> Iterator[None]:
-    """Exclusive lock on the bench directory: two benches never append to one results file."""
-    try:
-        import fcntl
-    except ImportError:  # not POSIX: no lock
-        yield
-        return
-    fh = open(out / LOCK, "a+")  # noqa: SIM115 - closed below
-    try:
-        try:
-            fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            fh.seek(0)
-            holder = fh.read().strip() or "another process"
-            raise BenchError(f"another bench is running in {out} ({holder}); wait for it or use another --out") \
-                from None
-        fh.truncate(0)
-        fh.write(f"pid {os.getpid()}\n")
-        fh.flush()
-        yield
-    finally:
-        fh.close()
-
-
+# ------------------------------------------------------------------------------------------------- tables
 def write_tables(out: str | Path) -> list[Path]:
     """(Re)write table.md, table.csv, table.tex and summary.csv of a bench directory from its results."""
     out = Path(out)
@@ -260,11 +218,17 @@ def write_tables(out: str | Path) -> list[Path]:
         raise BenchError(f"{out} is not a bench directory: {MANIFEST} is missing")
     suite = suite_from_dict(manifest["suite"], source=str(out / MANIFEST))
     pilots = [p["spec"] for p in manifest["pilots"]]
-    records = [r for r in ResultsLog(out / RESULTS).read() if r["pilot"] in pilots]
+    records = _in_key_order(r for r in ResultsLog(out / RESULTS).read() if r["pilot"] in pilots)
     paths = []
     for name, text in render_tables(suite, pilots, records, manifest.get("config_hash")).items():
         paths.append(write_atomic(out / name, text))
     return paths
+
+
+def _in_key_order(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Records by (pilot, row, repetition), not in the order episodes happened to finish: the sums behind the
+    tables and summaries (floating point) then depend only on which episodes ran, not on the executor."""
+    return sorted(records, key=record_key)
 
 
 # ------------------------------------------------------------------------------------------------- running
@@ -277,92 +241,95 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     t0 = time.perf_counter()
     import_plugins(settings.plugins)
     suite = effective_suite(settings)
-    pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url)
-    if settings.executor not in ("local", "ray", "inline"):
-        make_executor(settings.executor)  # raises the error that lists the executors
+    pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url, settings.pilot_options)
+    executor_factory(settings.executor)  # a bad name is refused before anything runs
     _check_episode_options(suite, settings.episode_options)
     config = config_of(suite, pilots, settings)
     chash = config_hash(config)
-    if settings.out is None and settings.resume:
-        raise ConfigError("--resume needs --out: the bench directory to resume")
-    out = check_writable(settings.out or default_run_dir("runs", f"bench-{suite.name}"))
+    out = _bench_dir(settings, suite)
     say: Printer = (lambda msg: console.print(msg, highlight=False)) if console is not None else (lambda msg: None)
-
-    with _bench_lock(out):
-        manifest = read_manifest(out)
+    started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
+    with bench_lock(out):
         log = ResultsLog(out / RESULTS)
-        notes: list[str] = []
-        if manifest is not None and not settings.resume:
-            done = len(log.read())
-            raise BenchError(f"{out} already holds a bench ({done} of {manifest.get('episodes', '?')} episodes "
-                             f"finished): pass --resume to continue it, or choose another --out")
-        if manifest is None and (log.path.exists() or (out / "runs").exists()):
-            raise BenchError(f"{out} holds results but no {MANIFEST}: it cannot be resumed; choose another --out")
-        if manifest is not None:
-            if manifest.get("config_hash") != chash:
-                diffs = _differences(manifest.get("config", {}), config)
-                raise BenchError(
-                    f"cannot resume {out}: its config hash is {manifest.get('config_hash')}, this bench's is {chash}. "
-                    "The suite, the pilots or the settings differ from the recorded ones:\n  - "
-                    + "\n  - ".join(diffs or ["(unreadable recorded config)"])
-                    + "\nResume with the recorded settings, or start a new bench with another --out.")
-        sha, phash = git_sha(), _prompt_hash(suite.profile)
-        session = {"started_at": time.strftime("%Y-%m-%dT%H:%M:%S%z"), "git_sha": sha, "prompt_hash": phash,
-                   "executor": settings.executor, "workers": settings.workers or default_workers(),
-                   "resume": manifest is not None,
-                   "versions": package_versions()}
-        if manifest is None:
-            manifest = {"format": FORMAT, "config_hash": chash, "config": config, "suite": suite.to_dict(),
-                        "suite_source": suite.source,
-                        "pilots": [{"spec": p.spec, "model": p.model, "dir": p.dir} for p in pilots],
-                        "episodes": len(suite.rows) * suite.repetitions * len(pilots),
-                        "created_at": session["started_at"], "sessions": []}
-        else:
-            last = (manifest.get("sessions") or [{}])[-1]
-            for what, old, new in (("git SHA", last.get("git_sha"), sha), ("prompt hash", last.get("prompt_hash"),
-                                                                           phash)):
-                if old and old != new:
-                    notes.append(f"note: the {what} changed since the last session ({old} -> {new}); "
-                                 "every results line records its own")
-        manifest["sessions"] = [*manifest.get("sessions", []), session]
-        write_json_atomic(out / MANIFEST, manifest)
-
-        specs = plan(suite, pilots, settings, out)
-        planned = {s.key for s in specs}
-        log.repair()
-        done_keys = {episode_key(*record_key(r)) for r in log.read()} & planned
-        todo = [s for s in specs if s.key not in done_keys]
+        manifest = BenchManifest.open(out, _fresh_manifest(suite, pilots, config, chash, started),
+                                      resume=settings.resume, log=log)
+        notes = manifest.start_session(_session(settings, suite, started))
         for n in notes:
             say(n)
-        failed: dict[str, str] = {}
-        ran = 0
-        executor = None
+        specs = plan(suite, pilots, settings, out)
+        log.repair()
+        done_keys = {episode_key(*record_key(r)) for r in log.read()} & {s.key for s in specs}
+        todo = [s for s in specs if s.key not in done_keys]
+        flight = _Flight(suite, pilots, len(specs), len(done_keys), out, chash, say)
         try:
-            if todo:
-                executor = make_executor(settings.executor, workers=settings.workers,
-                                         ray_address=settings.ray_address, plugins=settings.plugins)
-                say(f"bench [bold]{suite.name}[/bold]: {len(specs)} episodes ({len(suite.rows)} rows x "
-                    f"{suite.repetitions} reps x {len(pilots)} pilot(s)), {len(done_keys)} already done; "
-                    f"{executor.describe}; out {out}")
-                if settings.workers is None and settings.executor == "local" and not all(p.privileged
-                                                                                        for p in pilots):
-                    say("hint: model pilots spend most of a step waiting for the model; --workers 16 keeps more "
-                        "episodes in flight than there are cores")
-                ran, failed = _drive(executor, todo, log, chash, len(specs), len(done_keys), settings.progress,
-                                     console)
-            else:
-                say(f"bench {suite.name}: all {len(specs)} episodes are already in {out / RESULTS}")
+            ran, failed, describe = _fly(settings, flight, todo, log, console)
         finally:
             log.close()
-            close = getattr(executor, "close", None)
-            if callable(close):
-                close()
             tables = write_tables(out)
-        records = [r for r in log.read() if episode_key(*record_key(r)) in planned]
+        records = _in_key_order(r for r in log.read() if episode_key(*record_key(r)) in {s.key for s in specs})
         summaries = [summarize(p.spec, [r for r in records if r["pilot"] == p.spec]) for p in pilots]
         return BenchReport(out=out, config_hash=chash, episodes=len(specs), finished=len(records), ran=ran,
                            failed=failed, summaries=summaries, tables=tables, wall_s=time.perf_counter() - t0,
-                           executor=getattr(executor, "describe", ""), notes=notes)
+                           executor=describe, notes=notes)
+
+
+def _bench_dir(settings: BenchSettings, suite: Suite) -> Path:
+    if settings.out is None and settings.resume:
+        raise ConfigError("--resume needs --out: the bench directory to resume")
+    return check_writable(settings.out or default_run_dir("runs", f"bench-{suite.name}"))
+
+
+def _fresh_manifest(suite: Suite, pilots: Sequence[PilotEntry], config: dict[str, Any], chash: str,
+                    created_at: str) -> dict[str, Any]:
+    """The manifest of a new bench (its sessions are appended by `BenchManifest.start_session`)."""
+    return {"format": FORMAT, "config_hash": chash, "config": config, "suite": suite.to_dict(),
+            "suite_source": suite.source, "pilots": [{"spec": p.spec, "model": p.model, "dir": p.dir} for p in pilots],
+            "episodes": len(suite.rows) * suite.repetitions * len(pilots),
+            "created_at": created_at, "sessions": []}
+
+
+def _session(settings: BenchSettings, suite: Suite, started_at: str) -> dict[str, Any]:
+    """This session's provenance: when, which code and prompts, where it runs (`resume`: set by the manifest)."""
+    return {"started_at": started_at, "git_sha": git_sha(),
+            "prompt_hash": _prompt_hash(suite.profile), "executor": settings.executor,
+            "workers": settings.workers or default_workers(), "resume": settings.resume,
+            "versions": package_versions()}
+
+
+@dataclass(frozen=True)
+class _Flight:
+    """What the console lines and the progress bar of one session say."""
+
+    suite: Suite
+    pilots: Sequence[PilotEntry]
+    planned: int
+    done: int
+    out: Path
+    chash: str
+    say: Printer
+
+
+def _fly(settings: BenchSettings, flight: _Flight, todo: Sequence[EpisodeSpec], log: ResultsLog,
+         console: Any) -> tuple[int, dict[str, str], str]:
+    """The executor's life: made only if something is left to fly, closed whatever happens."""
+    suite = flight.suite
+    if not todo:
+        flight.say(f"bench {suite.name}: all {flight.planned} episodes are already in {flight.out / RESULTS}")
+        return 0, {}, ""
+    executor = make_executor(settings.executor, workers=settings.workers, ray_address=settings.ray_address,
+                             plugins=settings.plugins)
+    try:
+        flight.say(f"bench [bold]{suite.name}[/bold]: {flight.planned} episodes ({len(suite.rows)} rows x "
+                   f"{suite.repetitions} reps x {len(flight.pilots)} pilot(s)), {flight.done} already done; "
+                   f"{executor.describe}; out {flight.out}")
+        if settings.workers is None and settings.executor == "local" and not all(p.privileged for p in flight.pilots):
+            flight.say("hint: model pilots spend most of a step waiting for the model; --workers 16 keeps more "
+                       "episodes in flight than there are cores")
+        ran, failed = _drive(executor, todo, log, flight.chash, flight.planned, flight.done, settings.progress,
+                             console)
+        return ran, failed, executor.describe
+    finally:
+        executor.close()
 
 
 def _check_episode_options(suite: Suite, options: dict[str, Any]) -> None:

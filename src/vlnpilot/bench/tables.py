@@ -16,8 +16,10 @@ from collections.abc import Sequence
 from itertools import groupby
 from typing import Any
 
+from vlnpilot import episode_measures
 from vlnpilot.bench.results import CellStats, PilotSummary, cell_stats, summarize
 from vlnpilot.bench.suite import Suite, SuiteRow, episode_seed
+from vlnpilot.episode_measures import Column, column
 
 TABLE_MD, TABLE_CSV, TABLE_TEX, SUMMARY_CSV = "table.md", "table.csv", "table.tex", "summary.csv"
 LEGEND = ("Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; Steps = episodes "
@@ -95,18 +97,41 @@ def _md_row(cells: Sequence[str]) -> str:
     return "| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |"
 
 
-def _summary_cells(s: PilotSummary) -> list[str]:
-    rate = f"{s.successes}/{s.episodes} ({100 * s.success_rate:.1f}%)"
-    ci = f"{100 * s.ci_low:.1f}-{100 * s.ci_high:.1f}%" if s.episodes else "--"
-    return [s.pilot, _join(s.models), rate, ci, f"{s.spl:.3f}", f"{s.mean_steps:.1f}", str(s.collisions),
-            str(s.steps_exceeded), str(s.false_successes), str(s.pilot_errors), str(s.invalid_decisions),
-            str(s.oscillations), str(s.interventions), f"{s.input_tokens}/{s.output_tokens}", f"{s.cost_usd:.4f}",
-            _fmt(s.latency_p50_s), _fmt(s.latency_p95_s)]
+def _rate(s: PilotSummary) -> str:
+    return f"{s.successes}/{s.episodes} ({100 * s.success_rate:.1f}%)"
 
 
-SUMMARY_HEADER = ["Pilot", "Model", "Success", "95% CI (Wilson)", "SPL", "Mean steps", "Collisions",
-                  "Steps exceeded", "False successes", "Pilot errors", "Invalid decisions", "Oscillations",
-                  "Interventions", "Tokens in/out", "Cost (USD)", "Latency p50 (s)", "Latency p95 (s)"]
+def _ci(s: PilotSummary, dash: str = "-", percent: str = "%") -> str:
+    return f"{100 * s.ci_low:.1f}{dash}{100 * s.ci_high:.1f}{percent}" if s.episodes else "--"
+
+
+def _latency(name: str, md: str, tex: str, rank: int) -> Column:
+    return Column(rank, md, tex, (name,), lambda s: _fmt(getattr(s, name)),
+                  lambda s: ("" if getattr(s, name) is None else f"{getattr(s, name):.4f}",))
+
+
+# The bench's own columns of the summary per pilot. The measures' columns (`episode_measures.columns()`) go
+# between them by rank: SPL 50, Collisions 70, Invalid decisions 110, ..., a new measure's last by default.
+_OWN_COLUMNS = (
+    Column(0, "Pilot", "Pilot", ("pilot",), lambda s: s.pilot, lambda s: (s.pilot,), lambda s: tex_escape(s.pilot)),
+    Column(10, "Model", None, ("model",), lambda s: _join(s.models), lambda s: (_join(s.models),)),
+    Column(20, None, None, ("episodes",), lambda s: str(s.episodes), lambda s: (s.episodes,)),
+    Column(30, "Success", "Success", ("successes", "success_rate"), _rate,
+           lambda s: (s.successes, f"{s.success_rate:.4f}"), lambda s: f"{s.successes}/{s.episodes}"),
+    Column(40, "95% CI (Wilson)", "95\\% CI", ("ci95_low", "ci95_high"), _ci,
+           lambda s: (f"{s.ci_low:.4f}", f"{s.ci_high:.4f}"), lambda s: _ci(s, "--", "\\%")),
+    column("mean_steps", md="Mean steps", tex="Steps", fmt=".1f", csv_fmt=".2f", rank=60),
+    column("steps_exceeded", md="Steps exceeded", tex="Exc.", rank=80),
+    column("false_successes", md="False successes", tex="False", rank=90),
+    column("pilot_errors", md="Pilot errors", tex=None, rank=100),
+    _latency("latency_p50_s", "Latency p50 (s)", "p50 (s)", 170),
+    _latency("latency_p95_s", "Latency p95 (s)", "p95 (s)", 180),
+)
+
+
+def summary_columns() -> list[Column]:
+    """The columns of the summary per pilot, the bench's own and the measures', in rank order."""
+    return sorted((*_OWN_COLUMNS, *episode_measures.columns()), key=lambda c: c.rank)
 
 
 def render_markdown(data: _Data, config_hash: str | None = None) -> str:
@@ -119,9 +144,10 @@ def render_markdown(data: _Data, config_hash: str | None = None) -> str:
                 c = data.cell(p, row)
                 cells += [_ach(c), _dash(c.collisions), _dash(c.steps_exceeded)]
             lines.append(_md_row(cells))
-    lines += ["", LEGEND, "", "## Summary per pilot", "", _md_row(SUMMARY_HEADER),
-              _md_row(["---"] * 2 + ["---:"] * (len(SUMMARY_HEADER) - 2))]
-    lines += [_md_row(_summary_cells(s)) for s in data.summaries()]
+    cols = [c for c in summary_columns() if c.md is not None]
+    lines += ["", LEGEND, "", "## Summary per pilot", "", _md_row([str(c.md) for c in cols]),
+              _md_row(["---"] * 2 + ["---:"] * (len(cols) - 2))]
+    lines += [_md_row([c.text(s) for c in cols]) for s in data.summaries()]
     lines += ["", "SPL: mean over episodes of success weighted by path length; latency: per pilot call.", "",
               "Provenance:", ""]
     lines += [f"- {n}" for n in data.notes(config_hash)]
@@ -153,20 +179,11 @@ def render_csv(data: _Data) -> str:
 def render_summary_csv(data: _Data) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["pilot", "model", "episodes", "successes", "success_rate", "ci95_low", "ci95_high", "spl",
-                "mean_steps", "collisions", "steps_exceeded", "false_successes", "pilot_errors",
-                "invalid_decisions", "oscillations", "interventions", "input_tokens", "output_tokens", "cost_usd",
-                "pilot_calls", "latency_p50_s", "latency_p95_s", "shield", "prompt_hash", "git_sha"])
+    cols = summary_columns()
+    w.writerow([h for c in cols for h in c.csv] + ["shield", "prompt_hash", "git_sha"])
     for s in data.summaries():
         pv = data.provenance(s.pilot)
-        w.writerow([s.pilot, _join(s.models), s.episodes, s.successes, f"{s.success_rate:.4f}", f"{s.ci_low:.4f}",
-                    f"{s.ci_high:.4f}", f"{s.spl:.4f}", f"{s.mean_steps:.2f}", s.collisions, s.steps_exceeded,
-                    s.false_successes, s.pilot_errors, s.invalid_decisions, s.oscillations, s.interventions,
-                    s.input_tokens,
-                    s.output_tokens, f"{s.cost_usd:.6f}", s.pilot_calls,
-                    "" if s.latency_p50_s is None else f"{s.latency_p50_s:.4f}",
-                    "" if s.latency_p95_s is None else f"{s.latency_p95_s:.4f}", pv["shield"], pv["prompt_hash"],
-                    pv["git_sha"]])
+        w.writerow([v for c in cols for v in c.csv_cells(s)] + [pv["shield"], pv["prompt_hash"], pv["git_sha"]])
     return buf.getvalue()
 
 
@@ -207,22 +224,15 @@ def render_tex(data: _Data, config_hash: str | None = None) -> str:
             lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", "", r"\smallskip", r"\footnotesize " + e(LEGEND) + r"\\",
               r"Provenance: " + "; ".join(e(x) for x in data.notes(config_hash)) + ".", r"\end{table}", ""]
-    cols = ["Pilot", "Success", "95\\% CI", "SPL", "Steps", "Coll.", "Exc.", "False", "Invalid", "Osc.",
-            "Interv.", "Tokens in/out", "Cost (\\$)", "p50 (s)", "p95 (s)"]
+    cols = [c for c in summary_columns() if c.tex is not None]
     lines += [r"\begin{table}[ht]", r"\centering",
               r"\caption{Bench " + e(data.suite.name) + r": summary per pilot. Success rate with its 95\% Wilson "
               r"interval, SPL, mean steps, collisions, step limits reached, false successes, invalid decisions, "
               r"oscillations, safety-layer interventions, tokens, cost and pilot-call latency.}",
               r"\label{tab:bench-" + e(data.suite.name) + "-summary}", r"\small",
-              r"\begin{tabular}{l" + "r" * (len(cols) - 1) + "}", r"\toprule", " & ".join(cols) + r" \\",
-              r"\midrule"]
-    for s in data.summaries():
-        ci = f"{100 * s.ci_low:.1f}--{100 * s.ci_high:.1f}\\%" if s.episodes else "--"
-        lines.append(" & ".join([
-            e(s.pilot), f"{s.successes}/{s.episodes}", ci, f"{s.spl:.3f}", f"{s.mean_steps:.1f}", str(s.collisions),
-            str(s.steps_exceeded), str(s.false_successes), str(s.invalid_decisions), str(s.oscillations),
-            str(s.interventions), f"{s.input_tokens}/{s.output_tokens}", f"{s.cost_usd:.4f}", _fmt(s.latency_p50_s),
-            _fmt(s.latency_p95_s)]) + r" \\")
+              r"\begin{tabular}{l" + "r" * (len(cols) - 1) + "}", r"\toprule",
+              " & ".join(str(c.tex) for c in cols) + r" \\", r"\midrule"]
+    lines += [" & ".join(c.tex_cell(s) for c in cols) + r" \\" for s in data.summaries()]
     lines += [r"\bottomrule", r"\end{tabular}", r"\end{table}", ""]
     return "\n".join(lines)
 

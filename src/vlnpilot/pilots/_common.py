@@ -16,6 +16,7 @@ import re
 import time
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar, Literal, TypeVar
 
 from vlnpilot import pricing
@@ -32,9 +33,9 @@ from vlnpilot.decision import (
     parse_decision,
     validate_decision,
 )
-from vlnpilot.errors import ConfigError
 from vlnpilot.pilots._gate import CallGate
 from vlnpilot.pilots.base import PilotError
+from vlnpilot.pilots.options import ModelOptions
 
 log = logging.getLogger(__name__)
 _UNPRICED_WARNED: set[tuple[str, str]] = set()
@@ -51,9 +52,7 @@ _MODEL_GONE = re.compile(r"model_not_found|does not exist|not found|no longer (a
                          r"retired|shut ?down|decommissioned|discontinued")
 _MODEL_FAMILIES = ("gpt-", "gemini-", "claude-")
 
-DEFAULT_TIMEOUT_S = 30.0
-DEFAULT_MAX_RETRIES = 2
-DEFAULT_MAX_OUTPUT_TOKENS = 512  # a decision is ~100 tokens: this caps the request too
+DEFAULT_MAX_RETRIES = 2  # of call_with_retries (the pilots take theirs from their options)
 MAX_RETRY_AFTER_S = 60.0  # a server asking for a longer wait is not retried: the step would stall
 
 
@@ -294,43 +293,22 @@ class ModelPilot:
 
     name: ClassVar[str]
     provider: ClassVar[str]
-    default_model: ClassVar[str]
     key_envs: ClassVar[tuple[str, ...]]
     _secret: Secret = Secret(None)  # subclasses keep their key here (the SDK client holds it too)
 
-    def __init__(
-        self,
-        model: str | None = None,
-        *,
-        timeout: float = DEFAULT_TIMEOUT_S,
-        max_retries: int = DEFAULT_MAX_RETRIES,
-        max_output_tokens: int = DEFAULT_MAX_OUTPUT_TOKENS,
-        temperature: float | None = None,
-        jpeg_quality: int = 85,
-        max_side: int | None = None,
-        validate: bool = True,
-        prices: str | os.PathLike[str] | Mapping[str, pricing.Price] | None = None,
-    ):
-        self.model = model or self.default_model
-        if not (isinstance(timeout, int | float) and timeout > 0):
-            raise ConfigError(f"timeout must be a positive number of seconds, got {timeout!r}")
-        if not (isinstance(max_retries, int) and max_retries >= 0):
-            raise ConfigError(f"max_retries must be an integer >= 0, got {max_retries!r}")
-        if not (isinstance(max_output_tokens, int) and max_output_tokens > 0):
-            raise ConfigError(f"max_output_tokens must be a positive integer, got {max_output_tokens!r}")
-        if not (isinstance(jpeg_quality, int) and 1 <= jpeg_quality <= 100):
-            raise ConfigError(f"jpeg_quality must be in 1..100, got {jpeg_quality!r}")
-        self.timeout = float(timeout)
-        self.max_retries = max_retries
-        self.max_output_tokens = max_output_tokens
-        self.temperature = temperature
-        self.jpeg_quality = jpeg_quality
-        self.max_side = max_side
-        self.validate = validate
-        if prices is None or isinstance(prices, Mapping):
-            self._prices = prices
-        else:
-            self._prices = pricing.load_prices(prices)
+    def __init__(self, options: ModelOptions):
+        """Read the settings every model pilot shares from its validated options (a subclass builds them)."""
+        self.options = options
+        self.model = options.model
+        self.timeout = options.timeout
+        self.max_retries = options.max_retries
+        self.max_output_tokens = options.max_output_tokens
+        self.temperature = options.temperature
+        self.jpeg_quality = options.jpeg_quality
+        self.max_side = options.max_side
+        self.validate = options.validate_replies
+        prices = options.prices
+        self._prices = pricing.load_prices(prices) if isinstance(prices, Path) else prices
         self._gate = CallGate()  # subclasses hook it into their SDK's HTTP client (see cancel_pending)
         self.price_known = pricing.find_price(self.model, self._prices) is not None
         if not self.price_known and (self.provider, self.model) not in _UNPRICED_WARNED:

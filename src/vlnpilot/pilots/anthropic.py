@@ -17,6 +17,7 @@ import anthropic as anthropic_sdk
 
 from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, resolve_api_key
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import ModelOptions, secret_value
 
 log = logging.getLogger(__name__)
 
@@ -24,12 +25,20 @@ TOOL_NAME = "submit_decision"
 _CACHE = {"type": "ephemeral"}
 
 
-@register_pilot("anthropic")
+class AnthropicOptions(ModelOptions):
+    """The options of the Anthropic pilot (the common ones are ModelOptions')."""
+
+    model: str = "claude-sonnet-4-6"
+    cache: bool = True  # prompt-cache breakpoints
+    strict_tool: bool = False  # send the tool with strict=True (models that support strict tool use)
+
+
+@register_pilot("anthropic", options=AnthropicOptions)
 class AnthropicPilot(ModelPilot):
     """Claude as the pilot.
 
-    Options: model (default claude-sonnet-4-6), api_key (default env ANTHROPIC_API_KEY), base_url
-    (default env ANTHROPIC_BASE_URL, else the Anthropic API), cache (prompt-cache breakpoints, default
+    Options (`AnthropicOptions`): model (default claude-sonnet-4-6), api_key (default env ANTHROPIC_API_KEY),
+    base_url (default env ANTHROPIC_BASE_URL, else the Anthropic API), cache (prompt-cache breakpoints, default
     True), strict_tool (send the tool with strict=True, for models that support strict tool use;
     default False), and the common options of ModelPilot (timeout, max_retries, max_output_tokens,
     temperature, jpeg_quality, max_side, validate, prices).
@@ -37,26 +46,17 @@ class AnthropicPilot(ModelPilot):
 
     name = "anthropic"
     provider = "Anthropic"
-    default_model = "claude-sonnet-4-6"
     key_envs = ("ANTHROPIC_API_KEY",)
 
-    def __init__(
-        self,
-        model: str | None = None,
-        *,
-        api_key: str | None = None,
-        base_url: str | None = None,
-        cache: bool = True,
-        strict_tool: bool = False,
-        **options: Any,
-    ):
-        super().__init__(model, **options)
-        key = resolve_api_key(api_key, self.key_envs, "Anthropic")
-        self.cache = cache
-        self.strict_tool = strict_tool
+    def __init__(self, model: str | None = None, **options: Any):
+        o = AnthropicOptions.build(self.name, model=model, **options)
+        super().__init__(o)
+        key = resolve_api_key(secret_value(o.api_key), self.key_envs, "Anthropic")
+        self.cache = o.cache
+        self.strict_tool = o.strict_tool
         self._secret = Secret(key)
         http_client = anthropic_sdk.DefaultHttpxClient(event_hooks={"request": [self._gate.on_request]})
-        self._client = anthropic_sdk.Anthropic(api_key=key, base_url=base_url, timeout=self.timeout,
+        self._client = anthropic_sdk.Anthropic(api_key=key, base_url=o.base_url, timeout=self.timeout,
                                                max_retries=self.max_retries, http_client=http_client)
         self.base_url = str(self._client.base_url)
 

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.errors import UnknownNameError, VLNPilotError
+from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 
 
 class PilotError(VLNPilotError):
@@ -33,14 +35,28 @@ class Pilot(Protocol):
 
 
 PilotFactory = Callable[..., Pilot]
-_REGISTRY: dict[str, PilotFactory] = {}
 
 
-def register_pilot(name: str) -> Callable[[PilotFactory], PilotFactory]:
-    """Register a pilot factory under a name; the factory takes `model=` and keyword options."""
+@dataclass(frozen=True)
+class Registration:
+    """A registered pilot: its factory and the class that validates its options (and knows their defaults)."""
+
+    factory: PilotFactory
+    options: type[PilotOptions]
+
+
+_REGISTRY: dict[str, Registration] = {}
+
+
+def register_pilot(name: str, *, options: type[PilotOptions] = OpenPilotOptions
+                   ) -> Callable[[PilotFactory], PilotFactory]:
+    """Register a pilot factory under a name with its options class; the factory takes `model=` and the options.
+
+    Without an options class (a plugin's quick pilot) the options reach the factory unchecked.
+    """
 
     def deco(factory: PilotFactory) -> PilotFactory:
-        _REGISTRY[name] = factory
+        _REGISTRY[name] = Registration(factory, options)
         return factory
 
     return deco
@@ -76,8 +92,8 @@ def parse_spec(spec: str) -> tuple[str, str | None]:
     return name.strip().lower(), (model.strip() or None)
 
 
-def pilot_factory(name: str) -> PilotFactory:
-    """The registered factory of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
+def registration(name: str) -> Registration:
+    """The registration of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
     _load_builtin_pilots(only=name)
     if name not in _REGISTRY:
         _load_builtin_pilots()
@@ -86,10 +102,23 @@ def pilot_factory(name: str) -> PilotFactory:
     return _REGISTRY[name]
 
 
+def pilot_factory(name: str) -> PilotFactory:
+    """The registered factory of a pilot name; a bad name lists the known ones."""
+    return registration(name).factory
+
+
+def pilot_options_class(name: str) -> type[PilotOptions]:
+    """The options class of a pilot name: what it accepts, its defaults (`default_model()`); a bad name lists them."""
+    return registration(name).options
+
+
 def make_pilot(spec: str, **options: Any) -> Pilot:
-    """Build a pilot from a SPEC (`name` or `name:model`); a bad name lists the known ones."""
+    """Build a pilot from a SPEC (`name` or `name:model`) and its options, validated by its options class.
+
+    A bad name lists the known pilots; a bad option is one ConfigError line with the valid option names.
+    """
     name, model = parse_spec(spec)
-    factory = pilot_factory(name)
+    entry = registration(name)
     if model is not None:
         options["model"] = model
-    return factory(**options)
+    return entry.factory(**entry.options.build(name, **options).given())

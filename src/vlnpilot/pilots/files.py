@@ -33,14 +33,16 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 from PIL import Image
+from pydantic import Field
 
 from vlnpilot.decision import FIELDS, Decision, PilotInput, Usage, parse_decision
 from vlnpilot.errors import ConfigError
 from vlnpilot.fileio import write_atomic
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting import build_prompt
 
 # The files a run writes (NNN.png, NNN.prompt.md, NNN.answer.json, their temp files, and the fixed names):
@@ -80,36 +82,43 @@ def _answer_instructions(call: str, first_of_episode: bool) -> str:
     return "\n".join(lines) + "\n"
 
 
-@register_pilot("files")
+class FilesOptions(PilotOptions):
+    """The options of the files pilot. `clock` and `sleep` are programmatic (injected by tests)."""
+
+    programmatic: ClassVar[frozenset[str]] = frozenset({"clock", "sleep"})
+
+    model: str | None = None  # the SPEC's DIR (files:DIR) when `directory` is not given
+    directory: Path | None = None
+    timeout_s: float = Field(600.0, gt=0)  # wait per call, then a fatal PilotError
+    overwrite: bool = False  # delete another run's files in DIR instead of refusing
+    poll_s: float = Field(0.2, gt=0)  # how often it looks for the answer
+    grace_s: float = Field(2.0, gt=0)  # how long a present but unparsable answer may still be being written
+    clock: Callable[[], float] = Field(time.monotonic, repr=False)
+    sleep: Callable[[float], None] = Field(time.sleep, repr=False)
+
+
+@register_pilot("files", options=FilesOptions)
 class FilesPilot:
     """Writes each call's prompt and image into a directory and waits for the answer file.
 
-    Options: `directory` (or the SPEC `files:DIR`), `timeout_s` (wait per call, default 600 s; then a fatal
-    PilotError), `overwrite` (delete another run's files in DIR instead of refusing), `poll_s` (how often it
-    looks for the answer), `grace_s` (how long a present but unparsable answer file may still be being
+    Options (`FilesOptions`): `directory` (or the SPEC `files:DIR`), `timeout_s` (wait per call, default 600 s;
+    then a fatal PilotError), `overwrite` (delete another run's files in DIR instead of refusing), `poll_s` (how
+    often it looks for the answer), `grace_s` (how long a present but unparsable answer file may still be being
     written), `clock` and `sleep` (injectable for tests).
     """
 
     name = "files"
 
-    def __init__(self, model: str | None = None, *, directory: str | Path | None = None, timeout_s: float = 600.0,
-                 overwrite: bool = False, poll_s: float = 0.2, grace_s: float = 2.0,
-                 clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
-                 **options: Any):
-        if options:
-            raise ConfigError(f"unknown option(s) for the files pilot: {', '.join(sorted(options))}; valid options: "
-                              "directory, timeout_s, overwrite, poll_s, grace_s, clock, sleep")
-        source = directory if directory is not None else model
+    def __init__(self, model: str | None = None, **options: Any):
+        o = FilesOptions.build(self.name, model=model, **options)
+        source = o.directory if o.directory is not None else o.model
         if source is None or not str(source).strip():
             raise ConfigError("the files pilot needs a directory: use --pilot files:DIR (e.g. files:/tmp/ep1)")
-        for option, value in (("timeout_s", timeout_s), ("poll_s", poll_s), ("grace_s", grace_s)):
-            if not value > 0:
-                raise ConfigError(f"{option} of the files pilot must be positive, got {value!r}")
         self.directory = Path(source).expanduser()
         self.model = "files"
-        self.timeout_s, self.poll_s, self.grace_s = float(timeout_s), float(poll_s), float(grace_s)
-        self.clock, self.sleep = clock, sleep
-        prepare_directory(self.directory, overwrite)
+        self.timeout_s, self.poll_s, self.grace_s = o.timeout_s, o.poll_s, o.grace_s
+        self.clock, self.sleep = o.clock, o.sleep
+        prepare_directory(self.directory, o.overwrite)
         self.calls = 0
         self._last_step: int | None = None
         self._finished = False

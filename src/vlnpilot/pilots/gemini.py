@@ -15,7 +15,7 @@ import logging
 import os
 import re
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 from google import genai
 from google.genai import errors as genai_errors
@@ -38,6 +38,7 @@ from vlnpilot.pilots._common import (
     timeout_error,
 )
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import ModelOptions, secret_value
 
 log = logging.getLogger(__name__)
 
@@ -91,13 +92,23 @@ def thinking_settings(model: str, budget: int | None, level: str | None) -> tupl
     return {"thinking_budget": budget}, budget
 
 
-@register_pilot("gemini")
+class GeminiOptions(ModelOptions):
+    """The options of the Gemini pilot (the common ones are ModelOptions')."""
+
+    model: str = "gemini-2.5-flash"
+    thinking_budget: int | None = 0  # 0: off; None: the model's default; -1: dynamic
+    thinking_level: str | None = None  # Gemini 3 style, e.g. "low"; replaces thinking_budget when given
+    media_resolution: Literal["low", "medium", "high"] | None = None
+    retry_base_delay: float = 0.5  # seconds, the first backoff step
+
+
+@register_pilot("gemini", options=GeminiOptions)
 class GeminiPilot(ModelPilot):
     """Gemini as the pilot.
 
-    Options: model (default gemini-2.5-flash), api_key (default env GEMINI_API_KEY, then GOOGLE_API_KEY),
-    base_url (default env GOOGLE_GEMINI_BASE_URL; the Gemini API otherwise), thinking_budget (default 0:
-    off; None leaves the model's default, -1 is dynamic), thinking_level (Gemini 3 style, e.g. "low";
+    Options (`GeminiOptions`): model (default gemini-2.5-flash), api_key (default env GEMINI_API_KEY, then
+    GOOGLE_API_KEY), base_url (default env GOOGLE_GEMINI_BASE_URL; the Gemini API otherwise), thinking_budget
+    (default 0: off; None leaves the model's default, -1 is dynamic), thinking_level (Gemini 3 style, e.g. "low";
     replaces thinking_budget when given), media_resolution ("low" | "medium" | "high"), retry_base_delay
     (seconds, first backoff step), and the common options of ModelPilot (timeout, max_retries,
     max_output_tokens, temperature, jpeg_quality, max_side, validate, prices).
@@ -105,33 +116,18 @@ class GeminiPilot(ModelPilot):
 
     name = "gemini"
     provider = "Gemini"
-    default_model = "gemini-2.5-flash"
     key_envs = ("GEMINI_API_KEY", "GOOGLE_API_KEY")
 
-    def __init__(
-        self,
-        model: str | None = None,
-        *,
-        api_key: str | None = None,
-        base_url: str | None = None,
-        thinking_budget: int | None = 0,
-        thinking_level: str | None = None,
-        media_resolution: str | None = None,
-        retry_base_delay: float = 0.5,
-        **options: Any,
-    ):
-        super().__init__(model, **options)
-        if media_resolution is not None and media_resolution not in _MEDIA_RESOLUTIONS:
-            raise ConfigError(f"media_resolution must be low, medium or high, got {media_resolution!r}")
-        if thinking_budget is not None and not isinstance(thinking_budget, int):
-            raise ConfigError(f"thinking_budget must be an integer (0 = off, -1 = dynamic), got {thinking_budget!r}")
-        self._thinking, self._thinking_tokens = thinking_settings(self.model, thinking_budget, thinking_level)
-        key = resolve_api_key(api_key, self.key_envs, "Gemini")
-        self.base_url = base_url or os.environ.get("GOOGLE_GEMINI_BASE_URL") or None
-        self.thinking_budget = thinking_budget
-        self.thinking_level = thinking_level
-        self.media_resolution = media_resolution
-        self.retry_base_delay = float(retry_base_delay)
+    def __init__(self, model: str | None = None, **options: Any):
+        o = GeminiOptions.build(self.name, model=model, **options)
+        super().__init__(o)
+        self._thinking, self._thinking_tokens = thinking_settings(self.model, o.thinking_budget, o.thinking_level)
+        key = resolve_api_key(secret_value(o.api_key), self.key_envs, "Gemini")
+        self.base_url = o.base_url or os.environ.get("GOOGLE_GEMINI_BASE_URL") or None
+        self.thinking_budget = o.thinking_budget
+        self.thinking_level = o.thinking_level
+        self.media_resolution = o.media_resolution
+        self.retry_base_delay = o.retry_base_delay
         http_options = types.HttpOptions(
             base_url=self.base_url,
             timeout=max(1, round(self.timeout * 1000)),  # milliseconds

@@ -22,43 +22,64 @@ from __future__ import annotations
 
 import math
 from dataclasses import replace
+from typing import Annotated, Any
 
 import numpy as np
+from pydantic import Field, field_validator
 
 from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.errors import ConfigError
 from vlnpilot.fsm import State
 from vlnpilot.pilots.base import register_pilot
-from vlnpilot.pilots.oracle import OraclePilot
+from vlnpilot.pilots.oracle import OracleOptions, OraclePilot
 from vlnpilot.safety import ASSIST_NOTE, GUARD_NOTE, SHIELD_NOTE
 from vlnpilot.scene.model import Door
 from vlnpilot.tasks import parse_query
 from vlnpilot.types import Pose, wrap_deg
 
 OBJECT_KEY = "object"
+Probability = Annotated[float, Field(ge=0.0, le=1.0)]
 
 
-@register_pilot("noisy-oracle")
+class NoisyOracleOptions(OracleOptions):
+    """The failure odds and sizes of the noisy oracle (see the module docstring), besides the oracle's options."""
+
+    model: str = "ground-truth+noise"
+    seed: int = 0
+    p_offset: Probability = 0.25
+    offset_m: tuple[float, float] = (0.36, 0.46)  # (low, high) of the believed centre line's offset
+    p_strict: Probability = 0.34
+    strict_deg: float = 2.0
+    strict_lateral_m: float = 0.01
+    p_early: Probability = 0.03
+    early_distance_m: float = 1.8
+    heed_feedback: bool = True
+
+    @field_validator("offset_m", mode="before")
+    @classmethod
+    def _pair(cls, value: Any) -> Any:  # "0.3,0.4" from the command line
+        return tuple(value.split(",")) if isinstance(value, str) else value
+
+    @field_validator("offset_m")
+    @classmethod
+    def _ordered(cls, value: tuple[float, float]) -> tuple[float, float]:
+        if not 0 <= value[0] <= value[1]:
+            raise ValueError("must be (low, high) with 0 <= low <= high")
+        return value
+
+
+@register_pilot("noisy-oracle", options=NoisyOracleOptions)
 class NoisyOraclePilot(OraclePilot):
     """The oracle with seeded offset, oscillation and early-final failures (see the module docstring)."""
 
     name = "noisy-oracle"
 
-    def __init__(self, model: str | None = None, seed: int = 0, p_offset: float = 0.25,
-                 offset_m: tuple[float, float] = (0.36, 0.46), p_strict: float = 0.34, strict_deg: float = 2.0,
-                 strict_lateral_m: float = 0.01, p_early: float = 0.03, early_distance_m: float = 1.8,
-                 heed_feedback: bool = True, **oracle_options):
-        super().__init__(model=model or "ground-truth+noise", **oracle_options)
-        for label, p in (("p_offset", p_offset), ("p_strict", p_strict), ("p_early", p_early)):
-            if not 0.0 <= float(p) <= 1.0:
-                raise ConfigError(f"noisy-oracle {label} must be a probability in 0..1, got {p!r}")
-        lo, hi = (float(v) for v in offset_m)
-        if not 0 <= lo <= hi:
-            raise ConfigError(f"noisy-oracle offset_m must be (low, high) with 0 <= low <= high, got {offset_m!r}")
-        self.seed = int(seed)
-        self.p_offset, self.offset_m, self.p_strict = float(p_offset), (lo, hi), float(p_strict)
-        self.strict_deg, self.strict_lateral_m = float(strict_deg), float(strict_lateral_m)
-        self.p_early, self.early_distance_m, self.heed_feedback = float(p_early), float(early_distance_m), heed_feedback
+    def __init__(self, model: str | None = None, **options: Any):
+        o = NoisyOracleOptions.build(self.name, model=model, **options)
+        self._configure(o)
+        self.seed = o.seed
+        self.p_offset, self.offset_m, self.p_strict = o.p_offset, o.offset_m, o.p_strict
+        self.strict_deg, self.strict_lateral_m = o.strict_deg, o.strict_lateral_m
+        self.p_early, self.early_distance_m, self.heed_feedback = o.p_early, o.early_distance_m, o.heed_feedback
         self._rng = np.random.default_rng(self.seed)
         self._plan: dict | None = None
         self._fixed: set[str] = set()  # doors whose centre it re-estimated after feedback

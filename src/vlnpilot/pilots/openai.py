@@ -20,9 +20,9 @@ from urllib.parse import urlsplit
 
 import openai as openai_sdk
 
-from vlnpilot.errors import ConfigError
 from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, redact, resolve_api_key
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import ModelOptions, secret_value
 
 log = logging.getLogger(__name__)
 
@@ -35,12 +35,22 @@ _FORMAT_PARAMS = ("response_format", "json_schema", "structured output", "struct
 OFFICIAL_HOST = "api.openai.com"
 
 
-@register_pilot("openai")
+class OpenAIOptions(ModelOptions):
+    """The options of the OpenAI pilot (the common ones are ModelOptions')."""
+
+    model: str = "gpt-4.1"
+    detail: Literal["low", "high", "auto"] = "low"
+    response_format: ResponseFormat = "auto"
+    max_tokens_param: Literal["max_completion_tokens", "max_tokens"] | None = None  # None: by the server
+    extra_body: dict[str, Any] | None = None
+
+
+@register_pilot("openai", options=OpenAIOptions)
 class OpenAIPilot(ModelPilot):
     """GPT (or any OpenAI-compatible model) as the pilot.
 
-    Options: model (default gpt-4.1), api_key (default env OPENAI_API_KEY), base_url (default env
-    OPENAI_BASE_URL), detail ("low" | "high" | "auto"), response_format ("auto": json_schema with a
+    Options (`OpenAIOptions`): model (default gpt-4.1), api_key (default env OPENAI_API_KEY), base_url (default
+    env OPENAI_BASE_URL), detail ("low" | "high" | "auto"), response_format ("auto": json_schema with a
     fallback to json_object; or "json_schema", "json_object", "none"), max_tokens_param
     ("max_completion_tokens" for api.openai.com, "max_tokens" for other servers by default),
     extra_body (dict merged into the request, e.g. vLLM sampling options), and the common options of
@@ -49,38 +59,22 @@ class OpenAIPilot(ModelPilot):
 
     name = "openai"
     provider = "OpenAI"
-    default_model = "gpt-4.1"
     key_envs = ("OPENAI_API_KEY",)
 
-    def __init__(
-        self,
-        model: str | None = None,
-        *,
-        api_key: str | None = None,
-        base_url: str | None = None,
-        detail: Literal["low", "high", "auto"] = "low",
-        response_format: ResponseFormat = "auto",
-        max_tokens_param: Literal["max_completion_tokens", "max_tokens"] | None = None,
-        extra_body: dict[str, Any] | None = None,
-        **options: Any,
-    ):
-        super().__init__(model, **options)
-        if detail not in ("low", "high", "auto"):
-            raise ConfigError(f"detail must be low, high or auto, got {detail!r}")
-        if response_format not in ("auto", "json_schema", "json_object", "none"):
-            raise ConfigError(f"response_format must be auto, json_schema, json_object or none, "
-                              f"got {response_format!r}")
-        self.base_url = base_url or os.environ.get("OPENAI_BASE_URL") or None
+    def __init__(self, model: str | None = None, **options: Any):
+        o = OpenAIOptions.build(self.name, model=model, **options)
+        super().__init__(o)
+        self.base_url = o.base_url or os.environ.get("OPENAI_BASE_URL") or None
         official = is_official(self.base_url)
         if not official:
             self.provider = "OpenAI-compatible"
         # A local server needs no key; the official API does (a missing key is fatal and names the env var).
-        key = resolve_api_key(api_key, self.key_envs, "OpenAI", optional=not official) or "EMPTY"
-        self.detail = detail
-        self.response_format = response_format
-        self._format = "json_schema" if response_format == "auto" else response_format
-        self.max_tokens_param = max_tokens_param or ("max_completion_tokens" if official else "max_tokens")
-        self.extra_body = dict(extra_body or {})
+        key = resolve_api_key(secret_value(o.api_key), self.key_envs, "OpenAI", optional=not official) or "EMPTY"
+        self.detail = o.detail
+        self.response_format = o.response_format
+        self._format = "json_schema" if o.response_format == "auto" else o.response_format
+        self.max_tokens_param = o.max_tokens_param or ("max_completion_tokens" if official else "max_tokens")
+        self.extra_body = dict(o.extra_body or {})
         self._secret = Secret(key)
         self._client = openai_sdk.OpenAI(api_key=key, base_url=self.base_url, timeout=self.timeout,
                                          max_retries=self.max_retries, http_client=openai_sdk.DefaultHttpxClient(

@@ -10,13 +10,16 @@ point on the object's facing axis and turn to face it.
 from __future__ import annotations
 
 import math
-from typing import ClassVar
+from typing import Any, ClassVar
+
+from pydantic import Field
 
 from vlnpilot.commands import COMMANDS, Kind
 from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State, state_spec
 from vlnpilot.pilots.base import register_pilot
+from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.scene.model import Door
 from vlnpilot.tasks import SuccessConfig, Task, parse_query
 from vlnpilot.tello_spec import horizontal_fov_deg
@@ -49,18 +52,34 @@ def _signed(code: str) -> float:
     return c.amount if c.kind is Kind.ROTATE_LEFT else -c.amount if c.kind is Kind.ROTATE_RIGHT else 0.0
 
 
-@register_pilot("oracle")
+class OracleOptions(PilotOptions):
+    """The oracle's distances (metres). `success` is programmatic: the thresholds its episodes are judged by."""
+
+    programmatic: ClassVar[frozenset[str]] = frozenset({"success"})
+
+    model: str = "ground-truth"
+    approach_m: float = 0.45  # the approach point's distance before a doorway
+    cross_m: float = 0.35  # how far past the door plane a crossing ends
+    view_m: float = 0.7  # the viewing point's distance in front of an object
+    lateral_tol_m: float = 0.05  # off the doorway's centre line that still counts as centred
+    success: SuccessConfig = Field(default_factory=SuccessConfig)
+
+
+@register_pilot("oracle", options=OracleOptions)
 class OraclePilot:
     """Privileged pilot: `attach(ground_truth)` before the first `decide`."""
 
     name = "oracle"
     privileged: ClassVar[bool] = True
 
-    def __init__(self, model: str | None = None, approach_m: float = 0.45, cross_m: float = 0.35,
-                 view_m: float = 0.7, lateral_tol_m: float = 0.05, success: SuccessConfig | None = None):
-        self.model = model or "ground-truth"
-        self.approach_m, self.cross_m, self.view_m, self.lateral_tol_m = approach_m, cross_m, view_m, lateral_tol_m
-        self.success = success or SuccessConfig()
+    def __init__(self, model: str | None = None, **options: Any):
+        self._configure(OracleOptions.build(self.name, model=model, **options))
+
+    def _configure(self, o: OracleOptions) -> None:
+        self.model = o.model
+        self.approach_m, self.cross_m, self.view_m, self.lateral_tol_m = o.approach_m, o.cross_m, o.view_m, \
+            o.lateral_tol_m
+        self.success = o.success
         self._gt: GroundTruth | None = None
         self._task: Task | None = None
         self._room: str | None = None

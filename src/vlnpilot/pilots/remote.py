@@ -11,9 +11,10 @@ from __future__ import annotations
 import base64
 import os
 import time
-from typing import Any
+from typing import Any, ClassVar
 
 import httpx
+from pydantic import Field, SecretStr
 
 from vlnpilot.decision import Decision, PilotInput, Usage
 from vlnpilot.errors import ConfigError
@@ -30,12 +31,11 @@ from vlnpilot.pilots._common import (
 )
 from vlnpilot.pilots._gate import CallCancelled, CallGate
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import PilotOptions, secret_value
 
 URL_ENV = "VLN_PILOT_URL"
 TOKEN_ENV = "VLN_PILOT_TOKEN"
 DEFAULT_URL = "http://127.0.0.1:8000"
-# The server's own provider call may take its timeout (30 s) times its retries: wait longer than that.
-DEFAULT_TIMEOUT_S = 90.0
 
 
 class _Retryable(Exception):
@@ -44,11 +44,28 @@ class _Retryable(Exception):
         self.response = response
 
 
-@register_pilot("remote")
+class RemoteOptions(PilotOptions):
+    """The options of the remote pilot. `transport` is programmatic (an httpx transport, for tests)."""
+
+    programmatic: ClassVar[frozenset[str]] = frozenset({"transport"})
+
+    model: str | None = None  # the server-side pilot SPEC, e.g. "openai:gpt-4.1"; None: the server's default
+    url: str | None = None  # default: env VLN_PILOT_URL, else DEFAULT_URL
+    token: SecretStr | None = Field(None, repr=False)  # default: env VLN_PILOT_TOKEN
+    # The server's own provider call may take its timeout (30 s) times its retries: wait longer than that.
+    timeout: float = Field(90.0, gt=0)  # seconds per HTTP call
+    max_retries: int = Field(2, ge=0)
+    retry_base_delay: float = 0.5
+    jpeg_quality: int = Field(85, ge=1, le=100)
+    max_side: int | None = None
+    transport: httpx.BaseTransport | None = Field(None, repr=False)
+
+
+@register_pilot("remote", options=RemoteOptions)
 class RemotePilot:
     """A pilot that lives on a pilot server.
 
-    Options: model (the server-side pilot SPEC, e.g. "openai:gpt-4.1"; default: the server's),
+    Options (`RemoteOptions`): model (the server-side pilot SPEC, e.g. "openai:gpt-4.1"; default: the server's),
     url (default env VLN_PILOT_URL or http://127.0.0.1:8000), token (default env VLN_PILOT_TOKEN),
     timeout (seconds per HTTP call, default 90), max_retries (default 2), retry_base_delay,
     jpeg_quality, max_side, transport (an httpx transport, for tests).
@@ -58,36 +75,21 @@ class RemotePilot:
 
     name = "remote"
 
-    def __init__(
-        self,
-        model: str | None = None,
-        *,
-        url: str | None = None,
-        token: str | None = None,
-        timeout: float = DEFAULT_TIMEOUT_S,
-        max_retries: int = 2,
-        retry_base_delay: float = 0.5,
-        jpeg_quality: int = 85,
-        max_side: int | None = None,
-        transport: httpx.BaseTransport | None = None,
-    ):
-        if not (isinstance(timeout, int | float) and timeout > 0):
-            raise ConfigError(f"timeout must be a positive number of seconds, got {timeout!r}")
-        if not (isinstance(max_retries, int) and max_retries >= 0):
-            raise ConfigError(f"max_retries must be an integer >= 0, got {max_retries!r}")
-        self.model = model
-        self.url = (url or os.environ.get(URL_ENV) or DEFAULT_URL).rstrip("/")
+    def __init__(self, model: str | None = None, **options: Any):
+        o = RemoteOptions.build(self.name, model=model, **options)
+        self.model = o.model
+        self.url = (o.url or os.environ.get(URL_ENV) or DEFAULT_URL).rstrip("/")
         if not self.url.startswith(("http://", "https://")):
             raise ConfigError(f"the pilot server URL must start with http:// or https://, got {self.url!r}")
-        self.timeout = float(timeout)
-        self.max_retries = max_retries
-        self.retry_base_delay = float(retry_base_delay)
-        self.jpeg_quality = jpeg_quality
-        self.max_side = max_side
-        token = token or os.environ.get(TOKEN_ENV) or None
+        self.timeout = o.timeout
+        self.max_retries = o.max_retries
+        self.retry_base_delay = o.retry_base_delay
+        self.jpeg_quality = o.jpeg_quality
+        self.max_side = o.max_side
+        token = secret_value(o.token) or os.environ.get(TOKEN_ENV) or None
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self._gate = CallGate()  # abandoned calls send nothing more (see cancel_pending)
-        self._client = httpx.Client(base_url=self.url, timeout=self.timeout, headers=headers, transport=transport,
+        self._client = httpx.Client(base_url=self.url, timeout=self.timeout, headers=headers, transport=o.transport,
                                     event_hooks={"request": [self._gate.on_request]})
 
     def __repr__(self) -> str:

@@ -16,13 +16,23 @@ from vlnpilot.context import context_name
 from vlnpilot.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.record import load_run, load_trial
 
 _MALFORMED = "malformed answer: "
 _INVALID_PREFIXES = ("movement ", "next state ")  # validate_decision's reasons
 
 
-@register_pilot("replay")
+class ReplayOptions(PilotOptions):
+    """The options of the replay pilot; `row` is given by the bench (a set of trials holds one recording per row)."""
+
+    model: str | None = None  # the SPEC's RUN_DIR (replay:RUN_DIR) when `run_dir` is not given
+    run_dir: Path | None = None
+    strict: bool = False  # end the episode as soon as the controller's state differs from the recorded one
+    row: str | None = None  # the suite row whose recording to fly, in a set of trials
+
+
+@register_pilot("replay", options=ReplayOptions)
 class ReplayPilot:
     """Replays `run_dir`'s episode.jsonl (`make_pilot("replay:RUN_DIR")` or `make_pilot("replay", run_dir=...)`).
 
@@ -31,14 +41,14 @@ class ReplayPilot:
     """
 
     name = "replay"
-    wants_row = True  # the bench passes the suite row's id: a set of trials holds one recording per row
 
-    def __init__(self, model: str | None = None, *, run_dir: str | Path | None = None, strict: bool = False,
-                 row: str | None = None):
-        source = run_dir if run_dir is not None else model
+    def __init__(self, model: str | None = None, **options: Any):
+        o = ReplayOptions.build(self.name, model=model, **options)
+        source = o.run_dir if o.run_dir is not None else o.model
         if source is None:
             raise ConfigError("the replay pilot needs a recorded run: use --pilot replay:RUN_DIR "
                               "(or make_pilot('replay', run_dir=...))")
+        strict, row = o.strict, o.row
         self.run_dir = _recording(Path(source), row)
         self.strict = strict
         if self.run_dir is None:  # a set of trials without a row: the bench checks the spec once this way

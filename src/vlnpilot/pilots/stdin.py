@@ -17,36 +17,50 @@ import tempfile
 import time
 import weakref
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, Any, ClassVar
+
+from pydantic import Field
 
 from vlnpilot.decision import Decision, PilotInput, Usage, parse_decision
 from vlnpilot.errors import ConfigError
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting import build_prompt
 
 RULE = "=" * 100
 
 
-@register_pilot("stdin")
+class StdinOptions(PilotOptions):
+    """The options of the stdin pilot. `input` and `output` (text streams) are programmatic."""
+
+    programmatic: ClassVar[frozenset[str]] = frozenset({"input", "output"})
+
+    model: str = "stdin"
+    image_dir: Path | None = None  # where front images go; None: a fresh temporary directory
+    input: Any = Field(None, repr=False)  # None: sys.stdin at call time
+    output: Any = Field(None, repr=False)  # None: sys.stderr at call time
+    jpeg_quality: int = Field(85, ge=1, le=100)
+    show_system: bool = True  # print the system prompt at the start of each episode
+
+
+@register_pilot("stdin", options=StdinOptions)
 class StdinPilot:
     """Prompts on `output` (default standard error), reads one JSON line per answer from `input` (default stdin).
 
-    Options: `image_dir` (where front images go; default a fresh temporary directory), `input`/`output` streams
-    (for tests and embedding), `jpeg_quality`, `show_system` (print the system prompt at the start of each
-    episode; default True).
+    Options (`StdinOptions`): `image_dir` (where front images go; default a fresh temporary directory),
+    `input`/`output` streams (for tests and embedding), `jpeg_quality`, `show_system` (print the system prompt
+    at the start of each episode; default True).
     """
 
     name = "stdin"
 
-    def __init__(self, model: str | None = None, *, image_dir: str | Path | None = None, input: IO[str] | None = None,
-                 output: IO[str] | None = None, jpeg_quality: int = 85, show_system: bool = True, **options: Any):
-        if options:
-            raise ConfigError(f"unknown option(s) for the stdin pilot: {', '.join(sorted(options))}; "
-                              "valid options: image_dir, input, output, jpeg_quality, show_system")
-        self.model = model or "stdin"
-        self._input, self._output = input, output
-        self.jpeg_quality = jpeg_quality
-        self.show_system = show_system
+    def __init__(self, model: str | None = None, **options: Any):
+        o = StdinOptions.build(self.name, model=model, **options)
+        self.model = o.model
+        self._input, self._output = o.input, o.output
+        self.jpeg_quality = o.jpeg_quality
+        self.show_system = o.show_system
+        image_dir = o.image_dir
         if image_dir is None:  # ours: removed when the pilot is closed, collected, or the process exits
             image_dir = tempfile.mkdtemp(prefix="vlnpilot-stdin-")
             self.close = weakref.finalize(self, shutil.rmtree, image_dir, ignore_errors=True)

@@ -14,15 +14,22 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from vlnpilot.episode_record import step_keys
 from vlnpilot.record import load_run
 
 # Step-record keys of the safety layer (`vlnpilot.safety`): commands it changed, oscillation events, and the
 # feedback it puts into the next prompt. Absent in runs recorded before it existed.
 INTERVENTION_KEYS = ("interventions",)
 
-_KNOWN_KEYS = {"step", "state", "decision", "raw_text", "usage", "model", "failures", "proposed", "executed",
-               "next_state", "pose_before", "pose_after", "collided", "contact", "contact_part", "room_true",
-               "oscillation", "frames", "oscillation_event", "safety_feedback", *INTERVENTION_KEYS}
+# Recorded keys the page has no place for: shown raw ("other recorded fields"), as are keys the step record
+# does not know (a newer or a foreign writer's).
+SHOWN_RAW = ("override", "confirmation", "human", "robot")
+
+
+def known_keys() -> set[str]:
+    """The step-record keys the timeline reads into its own fields: the recorded format (`episode_record`)
+    but those shown raw."""
+    return set(step_keys()) - set(SHOWN_RAW)
 
 
 @dataclass
@@ -153,6 +160,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
         scene = load_scene_or_none(summary.get("scene"))
     prev_frames = summary.get("start_frames") or {"front": "frames/front_000.jpg", "rear": "frames/rear_000.jpg"}
     prev_room = None
+    known = known_keys()
     entries: list[Entry] = []
     for i, rec in enumerate(steps):
         pose = rec.get("pose_before")
@@ -167,7 +175,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
             frames=_existing(run_dir, prev_frames),
             oscillation_event=rec.get("oscillation_event") or None,
             feedback=[str(f) for f in rec.get("safety_feedback") or []],
-            extra={k: v for k, v in rec.items() if k not in _KNOWN_KEYS},
+            extra={k: v for k, v in rec.items() if k not in known},
         ))
         prev_frames = rec.get("frames") or {}
         prev_room = rec.get("room_true")

@@ -32,12 +32,15 @@ and a model that wants the door perfectly centred oscillates until the step limi
 Every change is an `Intervention(step, source, proposed, executed, reason)`: in `episode.jsonl`, the summary,
 `EpisodeResult.interventions`, and, as text, in the next prompt's controller feedback.
 
-Knowledge sources (`make_shield(name, env)`):
-- `geometry`: the simulator's collision geometry through a narrow query (`clearance_at(pose, max_distance)`
-  of the ground truth), evaluated at a superset of the poses at which the simulator checks the motion. Exact:
-  a command it lets through never collides in the simulator (property-tested). The upper bound.
-- `depth`: only the front depth image, as a drone with a depth sensor would have, plus odometry (the pose).
-  Each step's image is back-projected (vertical FOV `FRONT_FOVY`, 4:3) into points within a slab around the
+Knowledge sources (`make_shield(name, env)`, from what `env` declares in `environment.Capabilities`; a shield
+the environment cannot serve is refused with one line naming the ones it can):
+- `geometry` (needs `ground_truth`): the simulator's collision geometry through a narrow query
+  (`clearance_at(pose, max_distance)` of `types.GroundTruth`), evaluated at a superset of the poses at which the
+  simulator checks the motion (its `substeps`). Exact: a command it lets through never collides in the
+  simulator (property-tested). The upper bound.
+- `depth` (needs `depth`, not ground truth): only the front depth image (`environment.DepthSensing`), as a
+  drone with a depth sensor would have, plus odometry (the pose). Each step's image is back-projected (the
+  camera's declared vertical FOV, `front_fovy_deg`, 4:3) into points within a slab around the
   flight height and kept as a short memory (`memory_steps` steps, within `memory_radius_m`, voxel-thinned) in
   the odometry frame. Motions are checked against that memory with the same outline and margin. It assumes
   unseen space is free and that odometry is good over the memory's span. The camera sees a 69 x 55 degree cone

@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Any
-
 from vlnpilot.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.environment import Environment
 from vlnpilot.fsm import State
 from vlnpilot.safety.assist import DoorAssist
 from vlnpilot.safety.config import (
@@ -124,7 +123,7 @@ class SafetyLayer:
         return SafetyVerdict(cmd, nxt, tuple(found), event, tuple(notes))
 
 
-def make_safety(shield: str, env: Any, scene: Scene, config: SafetyConfig | None = None) -> SafetyLayer:
+def make_safety(shield: str, env: Environment, scene: Scene, config: SafetyConfig | None = None) -> SafetyLayer:
     """The controller's safety layer for a shield name; 'off' gives a passive layer (oscillation detection only)."""
     config = config or SafetyConfig()
     s = make_shield(shield, env, config)

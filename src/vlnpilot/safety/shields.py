@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from typing import Any, Protocol
+from typing import Protocol
 
 import numpy as np
 
 from vlnpilot import tello_spec
 from vlnpilot.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.environment import Environment, capabilities_of, depth_sensing_of, ground_truth_of, usable_shields
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.safety.config import _MIN_CLEARANCE, SHIELDS, SafetyConfig, obstacle_kind
 from vlnpilot.types import Motion, Observation, Pose
@@ -196,33 +197,36 @@ class DepthShield(Shield):
         return None
 
 
-def make_shield(name: str, env: Any, config: SafetyConfig | None = None) -> Shield | None:
-    """The shield called `name` ('off', 'geometry', 'depth') for `env`, or None for 'off'.
+def make_shield(name: str, env: Environment, config: SafetyConfig | None = None) -> Shield | None:
+    """The shield called `name` ('off', 'geometry', 'depth') for `env`, or None for 'off' (and 'assist').
 
-    `geometry` needs an environment with ground truth offering `clearance_at` (the simulator); `depth` needs
-    one that renders a front depth image (`render(camera, width, height, depth=True)`).
+    Read from what `env` declares (`environment.Capabilities`): `geometry` needs ground truth, whose
+    `clearance_at` and `substeps` are the simulator's collision geometry; `depth` needs a front depth image
+    (`environment.DepthSensing`), and works on a drone without ground truth.
     """
     config = config or SafetyConfig()
     key = str(name).strip().lower()
     if key in ("off", "assist"):
         return None
     if key == "geometry":
-        gt = env.ground_truth() if hasattr(env, "ground_truth") else None
-        if gt is None or not hasattr(gt, "clearance_at"):
-            raise ConfigError("the geometry shield needs the simulator's collision geometry, which this environment "
-                              "does not provide; use --shield depth or --shield off")
-        return GeometryShield(gt.clearance_at, config, getattr(gt, "substeps", None))
+        gt = ground_truth_of(env)
+        if gt is None:
+            raise ConfigError("the geometry shield needs ground truth (the simulator's collision geometry), which "
+                              f"this environment does not declare; valid shields here: {_usable(env)}")
+        return GeometryShield(gt.clearance_at, config, gt.substeps)
     if key == "depth":
-        if not hasattr(env, "render"):
-            raise ConfigError("the depth shield needs an environment that renders a front depth image; "
-                              "use --shield off")
-        from vlnpilot.sim import drone  # the camera name and intrinsics; no simulator object is kept
-
+        sensor = depth_sensing_of(env)
+        if sensor is None:
+            raise ConfigError("the depth shield needs a front depth image, which this environment does not "
+                              f"declare; valid shields here: {_usable(env)}")
         d = config.depth
 
         def depth_image() -> np.ndarray:
-            return env.render(drone.FRONT_CAMERA, d.width, d.height, depth=True)
+            return sensor.front_depth(d.width, d.height)
 
-        substeps = env.substeps if hasattr(env, "substeps") else None
-        return DepthShield(depth_image, config, substeps, fovy_deg=drone.FRONT_FOVY)
+        return DepthShield(depth_image, config, sensor.substeps, fovy_deg=sensor.front_fovy_deg)
     raise UnknownNameError("shield", name, SHIELDS)
+
+
+def _usable(env: object) -> str:
+    return usable_shields(capabilities_of(env))

@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.pilots.base import Pilot, parse_spec, pilot_factory
+from vlnpilot.pilots.base import Pilot, parse_spec, pilot_factory, pilot_options_class
 
 DEFAULT_MAX_CACHED = 8
 
@@ -23,7 +23,7 @@ def canonical_spec(spec: str) -> str:
     name, model = parse_spec(spec)
     if model is None:
         try:
-            model = getattr(pilot_factory(name), "default_model", None)
+            model = pilot_options_class(name).default_model()
         except UnknownNameError:
             model = None
     return f"{name}:{model}" if model else name

@@ -22,7 +22,7 @@ from vlnpilot.sim import (
     drone,  # noqa: E402
     gl,  # noqa: F401  (selects the headless GL backend before mujoco is imported)
 )
-from vlnpilot.types import Motion, Observation, Pose  # noqa: E402
+from vlnpilot.types import GroundTruth, Motion, Observation, Pose  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
 
@@ -60,9 +60,11 @@ def yaw_quat(yaw_deg: float) -> np.ndarray:
 
 
 class Simulator:
-    """Implements the Environment contract: `reset(spawn, seed)`, `step(command)`, `scene`."""
+    """Implements the Environment contract (`reset(spawn, seed)`, `step(command)`, `scene`, `capabilities`),
+    with ground truth (`ground_truth()`) and a front depth camera (`front_depth`, `front_fovy_deg`, `substeps`)."""
 
-    capabilities = Capabilities()  # ground truth, depth, rear view and contact sensing: all of them
+    capabilities = Capabilities(ground_truth=True, depth=True, rear_view=True, contact_sensing=True)  # all of them
+    front_fovy_deg = drone.FRONT_FOVY  # of the front camera, for the depth shield (`DepthSensing`)
 
     def __init__(self, scene: str | Scene = "cabin", config: SimConfig | None = None):
         self.scene: Scene = load_scene(scene)
@@ -291,6 +293,10 @@ class Simulator:
             if depth:
                 r.disable_depth_rendering()
 
+    def front_depth(self, width: int, height: int) -> np.ndarray:
+        """The front camera's z-depth image (HxW float32, metres) at the current pose (`DepthSensing`)."""
+        return self.render(drone.FRONT_CAMERA, width, height, depth=True)
+
     def segmentation(self, camera: str = drone.FRONT_CAMERA) -> np.ndarray:
         """Per-pixel geom ids (-1 for background) of a low-resolution render, for visibility queries."""
         cfg = self.config
@@ -313,7 +319,7 @@ class Simulator:
         ids = self.segmentation()
         return float(np.isin(ids, list(self.target_geoms[target_id])).mean())
 
-    def ground_truth(self):  # -> SimGroundTruth; imported lazily to keep the module graph simple
+    def ground_truth(self) -> GroundTruth:  # a SimGroundTruth, imported lazily to keep the module graph simple
         from vlnpilot.sim.ground_truth import SimGroundTruth
 
         return SimGroundTruth(self)

@@ -1,0 +1,173 @@
+"""The worker's side of a bench: one episode from its spec (plain, picklable data) to its results record.
+
+Every executor (executors.py) runs `run_guarded(spec, simulators)` wherever it runs episodes, and reports
+the outcome as an `Event`; only the parent writes results.jsonl.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import shutil
+import socket
+import threading
+import time
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from vlnpilot.errors import ConfigError, VLNPilotError
+
+
+@dataclass(frozen=True)
+class EpisodeSpec:
+    """Everything a worker needs to fly and record one episode; plain data, picklable."""
+
+    key: str
+    pilot: str  # the SPEC, e.g. 'openai:gpt-4.1'
+    row: str
+    rep: int
+    seed: int
+    scene: str
+    spawn: str
+    query: str
+    goal_room: str
+    goal_target: str | None
+    max_steps: int
+    profile: str
+    run_dir: str  # absolute: where the worker writes
+    run_dir_rel: str  # relative to the bench directory: what results.jsonl records
+    pilot_options: dict[str, Any] = field(default_factory=dict)
+    episode_options: dict[str, Any] = field(default_factory=dict)  # extra EpisodeConfig fields (e.g. a shield)
+    render: bool = True
+    save_frames: bool = True
+    spawn_jitter_m: float = 0.0
+    spawn_jitter_deg: float = 0.0
+
+
+@dataclass(frozen=True)
+class Event:
+    kind: Literal["started", "finished", "failed"]
+    key: str
+    record: dict[str, Any] | None = None
+    error: str | None = None
+    worker: str | None = None
+
+
+class SimulatorCache:
+    """One Simulator per (thread, scene, settings), built on first use and reused for every later episode."""
+
+    def __init__(self, per_thread: int = 4) -> None:
+        self.per_thread = per_thread  # simulators kept per thread (each holds a model and GL renderers)
+        self._local = threading.local()
+        self._all: list[Any] = []
+        self._lock = threading.Lock()
+
+    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float) -> Any:
+        from vlnpilot.sim import SimConfig, Simulator
+
+        sims = getattr(self._local, "sims", None)
+        if sims is None:
+            sims = self._local.sims = {}
+        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg))
+        if key not in sims:
+            if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
+                self._close(sims.pop(next(iter(sims))))
+            sims[key] = Simulator(scene, key[1])
+            with self._lock:
+                self._all.append(sims[key])
+        sims[key] = sims.pop(key)  # most recently used last
+        return sims[key]
+
+    def _close(self, sim: Any) -> None:
+        with contextlib.suppress(Exception):
+            sim.close()
+        with self._lock:
+            if sim in self._all:
+                self._all.remove(sim)
+
+    def close_thread(self) -> None:
+        """Close this thread's simulators (their GL contexts must be released by the thread that owns them)."""
+        for sim in (getattr(self._local, "sims", None) or {}).values():
+            with contextlib.suppress(Exception):
+                sim.close()
+            with self._lock:
+                if sim in self._all:
+                    self._all.remove(sim)
+        self._local.sims = {}
+
+
+class TimedPilot:
+    """Wraps a pilot to time every call (including failed ones); delegates everything else."""
+
+    def __init__(self, pilot: Any):
+        self._pilot = pilot
+        self.latencies: list[float] = []
+
+    def decide(self, pilot_input: Any) -> Any:
+        t0 = time.perf_counter()
+        try:
+            return self._pilot.decide(pilot_input)
+        finally:
+            self.latencies.append(round(time.perf_counter() - t0, 4))
+
+    def __getattr__(self, name: str) -> Any:  # name, model, privileged, attach, ...
+        return getattr(self._pilot, name)
+
+
+def import_plugins(plugins: Sequence[str]) -> None:
+    """Import modules that register extra pilots (`@register_pilot`), in a worker or in the parent."""
+    for module in plugins:
+        try:
+            importlib.import_module(module)
+        except ImportError as exc:
+            raise ConfigError(f"cannot import pilot plugin module {module!r}: {exc}") from None
+
+
+def _pilot_options(spec: EpisodeSpec) -> dict[str, Any]:
+    """The spec's pilot options, plus the row id for pilots that fly one recording per row (replay of trials)."""
+    from vlnpilot.pilots.base import parse_spec, pilot_options_class
+
+    wants_row = pilot_options_class(parse_spec(spec.pilot)[0]).accepts("row")
+    return {**spec.pilot_options, "row": spec.row} if wants_row else dict(spec.pilot_options)
+
+
+def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any]:
+    """Fly and record one episode; the results.jsonl record (without the parent's fields)."""
+    from vlnpilot.episode import EpisodeConfig
+    from vlnpilot.episode_run import run_recorded_episode
+    from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.prompting import prompt_hash
+    from vlnpilot.record import git_sha
+    from vlnpilot.tasks import Task
+
+    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg)
+    pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
+    run_dir = Path(spec.run_dir)
+    if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
+        shutil.rmtree(run_dir)
+    config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
+    task = Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target)
+    result = run_recorded_episode(sim, pilot, task, config, run_dir=run_dir, spawn=spec.spawn,
+                                  pilot_spec=spec.pilot, save_frames=spec.save_frames and spec.render)
+    return {
+        "key": spec.key, "pilot": spec.pilot, "model": pilot.model, "row": spec.row, "rep": spec.rep,
+        "seed": spec.seed, "spawn": spec.spawn, "query": spec.query, "goal_room": spec.goal_room,
+        "goal_target": spec.goal_target, "result": result.to_dict(), "call_latencies_s": pilot.latencies,
+        "run_dir": spec.run_dir_rel,
+        "provenance": {"prompt_hash": prompt_hash(spec.profile), "git_sha": git_sha(),
+                       "worker": f"{socket.gethostname()}:{os.getpid()}"},
+    }
+
+
+def run_guarded(spec: EpisodeSpec, simulators: SimulatorCache) -> tuple[dict[str, Any] | None, str | None]:
+    try:
+        return execute_spec(spec, simulators), None
+    except VLNPilotError as exc:
+        return None, f"{type(exc).__name__}: {exc}"
+    except Exception as exc:  # noqa: BLE001 - reported to the parent, which keeps the key for --resume
+        tb = traceback.format_exception(type(exc), exc, exc.__traceback__)
+        return None, f"{type(exc).__name__}: {exc}\n" + "".join(tb[-6:])

@@ -1,0 +1,44 @@
+"""One episode into a run directory: the set-up that `vln-pilot run` and the bench's workers share.
+
+`run_episode` flies and measures; this wraps it with the run directory's life cycle: the recorder opens the
+directory (summary.json first), and whatever happens the record is closed with a status that says how it
+ended (`finished`, `interrupted` by Ctrl-C or SIGTERM, `failed` by an exception), and the pilot is closed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+from vlnpilot.environment import Environment
+from vlnpilot.episode import EpisodeConfig, EpisodeResult, JudgeOutcome, LoopControl, run_episode
+from vlnpilot.episode_record import StepCallback
+from vlnpilot.pilots.base import Pilot
+from vlnpilot.record import Recorder
+from vlnpilot.tasks import Task
+
+
+def run_recorded_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, *,
+                         run_dir: str | Path, spawn: str | None = None, pilot_spec: str | None = None,
+                         save_frames: bool = True, overwrite: bool = False, on_step: StepCallback | None = None,
+                         judge_outcome: JudgeOutcome | None = None,
+                         control: LoopControl | None = None) -> EpisodeResult:
+    """Fly one episode recorded in `run_dir` (see `run_episode` for the hooks); the pilot is closed after it."""
+    recorder = Recorder(run_dir, save_frames=save_frames, overwrite=overwrite)
+    try:
+        return run_episode(env, pilot, task, config, spawn=spawn, recorder=recorder, pilot_spec=pilot_spec,
+                           on_step=on_step, judge_outcome=judge_outcome, control=control)
+    except KeyboardInterrupt:
+        recorder.close("interrupted")
+        raise
+    finally:
+        recorder.close("failed")  # a no-op after a finished or interrupted episode
+        close_pilot(pilot)
+
+
+def close_pilot(pilot: object) -> None:
+    """Release a pilot's connections (model SDK clients, the files pilot's directory); errors do not matter here."""
+    close = getattr(pilot, "close", None)
+    if callable(close):
+        with contextlib.suppress(Exception):
+            close()
