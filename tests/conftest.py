@@ -6,6 +6,9 @@ rely on the state another test left behind.
 
 from __future__ import annotations
 
+import threading
+import time
+
 import pytest
 
 from vlnpilot.scene import Scene, load_scene
@@ -48,3 +51,23 @@ def browser():
         b = pw.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
         yield b
         b.close()
+
+
+@pytest.fixture
+def retry_waits(monkeypatch: pytest.MonkeyPatch) -> list[float]:
+    """The seconds a pilot waits between retries in the test's thread, recorded instead of slept.
+
+    The SDKs (openai, anthropic) and our `call_with_retries` all wait through `time.sleep`; the fake servers'
+    threads keep the real one.
+    """
+    waits: list[float] = []
+    real_sleep, test_thread = time.sleep, threading.get_ident()
+
+    def sleep(seconds: float) -> None:
+        if threading.get_ident() == test_thread:
+            waits.append(seconds)
+        else:
+            real_sleep(seconds)
+
+    monkeypatch.setattr(time, "sleep", sleep)
+    return waits

@@ -52,7 +52,6 @@ class LiveEpisode:
         self.control = LiveControl(self.pilot)
         self.station = LiveStation(run_dir, control=self.control, scene=scene, port=0, token=token)
         self.records: list[dict[str, Any]] = []
-        self.ended_at: dict[int, float] = {}  # step -> time.monotonic() when its record was written
         self._stepped = threading.Condition()
         self.result: EpisodeResult | None = None
         task = parse_query("Go to the bathroom", scene)
@@ -75,7 +74,6 @@ class LiveEpisode:
     def _on_step(self, record: dict[str, Any]) -> None:
         with self._stepped:
             self.records.append(record)
-            self.ended_at[record["step"]] = time.monotonic()
             self._stepped.notify_all()
 
     def wait_steps(self, n: int, timeout: float = 30.0) -> None:

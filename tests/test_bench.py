@@ -15,6 +15,7 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
+from bench_records import bench_record
 from vlnpilot.bench import (
     BenchError,
     BenchSettings,
@@ -24,7 +25,6 @@ from vlnpilot.bench import (
     episode_seed,
     load_suite,
     percentile,
-    render_tables,
     run_bench,
     summarize,
     wilson_interval,
@@ -136,7 +136,7 @@ def test_spl_and_summary_aggregate_as_by_hand():
     # success, shortest 3 m, flown 4 m -> .75; success on the shortest path -> 1; failure -> 0: mean .5833
     values = [spl(True, 3.0, 4.0), spl(True, 2.0, 2.0), spl(False, 2.0, 9.0)]
     assert values == [0.75, 1.0, 0.0]
-    records = [_rec("p", "r", i + 1, o, steps=s, spl=v, latencies=lat) for i, (o, s, v, lat) in enumerate(
+    records = [bench_record("p", "r", i + 1, o, steps=s, spl=v, latencies=lat) for i, (o, s, v, lat) in enumerate(
         [("success", 10, 0.75, [1.0, 2.0]), ("success", 20, 1.0, [3.0]), ("collision", 30, 0.0, [4.0, 5.0])])]
     s = summarize("p", records)
     assert (s.episodes, s.successes, s.collisions) == (3, 2, 1)
@@ -148,7 +148,7 @@ def test_spl_and_summary_aggregate_as_by_hand():
 # ------------------------------------------------------------------------------------------- results log
 def test_results_log_skips_a_torn_line_and_keeps_one_line_per_key(tmp_path: Path):
     path = tmp_path / "results.jsonl"
-    a, b = _rec("p", "r", 1, "success"), _rec("p", "r", 2, "collision")
+    a, b = bench_record("p", "r", 1, "success"), bench_record("p", "r", 2, "collision")
     path.write_text(json.dumps(a) + "\n" + json.dumps({**a, "result": {"outcome": "max_steps"}}) + "\n"
                     + json.dumps(b)[:40])
     log = ResultsLog(path)
@@ -229,144 +229,6 @@ def test_bad_options_are_refused_before_anything_runs(tiny: Path, tmp_path: Path
     with pytest.raises(ConfigError, match="pilot.s. given twice: oracle"):
         bench_command(suite=str(tiny), pilots="oracle,oracle", out=out)
     assert not out.exists()
-
-
-# --------------------------------------------------------------------------------------------------- tables
-PILOTS = ["oracle", "openai:gpt-4.1"]
-GOLDEN_SUITE = {
-    "name": "golden", "repetitions": 2, "max_steps": 20, "seed": 7,
-    "spawn_labels": {"living_room": "Living Room and Kitchen"},
-    "rows": [{"id": "lr-bath", "spawn": "living_room", "query": "Go to the bathroom"},
-             {"id": "lr-fridge", "spawn": "living_room", "query": "Find the refrigerator"},
-             {"id": "bed-mirror", "spawn": "bedroom", "query": "Find the mirror in the bedroom"}],
-}
-
-
-def _rec(pilot: str, row: str, rep: int, outcome: str, *, steps: int = 10, spl: float | None = None,
-         model: str = "m", latencies: list[float] | None = None, tokens: tuple[int, int] = (0, 0),
-         cost: float = 0.0, invalid: int = 0, osc: int = 0, shield: str = "off", interventions: int = 0) -> dict:
-    return {
-        "key": f"{pilot}|{row}|{rep}", "pilot": pilot, "model": model, "row": row, "rep": rep, "seed": 1,
-        "result": {"outcome": outcome, "steps": steps, "spl": (1.0 if outcome == "success" else 0.0) if spl is None
-                   else spl, "collisions": int(outcome == "collision"), "invalid_decisions": invalid,
-                   "oscillations": osc, "input_tokens": tokens[0], "output_tokens": tokens[1], "cost_usd": cost,
-                   "pilot_calls": len(latencies or []), "latency_s_total": sum(latencies or []), "shield": shield,
-                   "interventions": interventions},
-        "call_latencies_s": latencies or [], "run_dir": f"runs/{pilot}/{row}/{rep}",
-        "provenance": {"prompt_hash": "abc123", "git_sha": "deadbeef"},
-    }
-
-
-def golden_records() -> list[dict]:
-    o = dict(model="ground-truth", latencies=[0.001, 0.002])
-    g = dict(model="gpt-4.1-2025-04-14", tokens=(1000, 100), cost=0.01, shield="geometry")
-    return [
-        _rec("oracle", "lr-bath", 1, "success", steps=40, spl=0.8, **o),
-        _rec("oracle", "lr-bath", 2, "success", steps=40, spl=0.8, **o),
-        _rec("oracle", "lr-fridge", 1, "success", steps=11, spl=0.9, **o),
-        _rec("oracle", "lr-fridge", 2, "success", steps=11, spl=0.9, **o),
-        _rec("oracle", "bed-mirror", 1, "success", steps=10, spl=1.0, **o),
-        _rec("oracle", "bed-mirror", 2, "success", steps=10, spl=1.0, **o),
-        _rec("openai:gpt-4.1", "lr-bath", 1, "collision", steps=12, latencies=[1.5, 2.5], invalid=1, **g),
-        _rec("openai:gpt-4.1", "lr-bath", 2, "max_steps", steps=20, latencies=[2.0, 2.0], osc=3, interventions=2,
-             **g),
-        _rec("openai:gpt-4.1", "lr-fridge", 1, "success", steps=15, spl=0.5, latencies=[1.0], **g),
-        _rec("openai:gpt-4.1", "lr-fridge", 2, "false_success", steps=9, latencies=[3.0], **g),
-        _rec("openai:gpt-4.1", "bed-mirror", 1, "success", steps=8, spl=0.75, latencies=[1.2, 1.8], **g),
-        # bed-mirror repetition 2 has not finished: the table says 1/1 and the footnote says incomplete
-    ]
-
-GOLDEN_MD = """\
-# Bench: golden
-
-| Starting Room | Query | oracle Ach. | oracle Coll. | oracle Steps | openai:gpt-4.1 Ach. | openai:gpt-4.1 Coll. | openai:gpt-4.1 Steps |
-| --- | --- | :---: | :---: | :---: | :---: | :---: | :---: |
-| Living Room and Kitchen | Go to the bathroom | 2/2 | -- | -- | 0/2 | 1 | 1 |
-|  | Find the refrigerator | 2/2 | -- | -- | 1/2 | -- | -- |
-| Bedroom | Find the mirror in the bedroom | 2/2 | -- | -- | 1/1 | -- | -- |
-
-Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; Steps = episodes that reached the step limit; -- = none.
-
-## Summary per pilot
-
-| Pilot | Model | Success | 95% CI (Wilson) | SPL | Mean steps | Collisions | Steps exceeded | False successes | Pilot errors | Invalid decisions | Oscillations | Interventions | Tokens in/out | Cost (USD) | Latency p50 (s) | Latency p95 (s) |
-| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |
-| oracle | ground-truth | 6/6 (100.0%) | 61.0-100.0% | 0.900 | 20.3 | 0 | 0 | 0 | 0 | 0 | 0 | 0 | 0/0 | 0.0000 | 0.002 | 0.002 |
-| openai:gpt-4.1 | gpt-4.1-2025-04-14 | 2/5 (40.0%) | 11.8-76.9% | 0.250 | 12.8 | 1 | 1 | 1 | 0 | 1 | 3 | 2 | 5000/500 | 0.0500 | 1.900 | 2.825 |
-
-SPL: mean over episodes of success weighted by path length; latency: per pilot call.
-
-Provenance:
-
-- oracle: model ground-truth, shield off, prompt hash abc123, git SHA deadbeef
-- openai:gpt-4.1: model gpt-4.1-2025-04-14, shield geometry, prompt hash abc123, git SHA deadbeef
-- seeds: per repetition, sha256 of (base seed 7, row, repetition); listed per row in table.csv
-- 11/12 episodes finished (incomplete: rerun the bench with --resume); config hash 0123456789abcdef
-"""
-
-GOLDEN_CSV = """\
-Starting Room,Query,oracle Ach.,oracle Coll.,oracle Steps,openai:gpt-4.1 Ach.,openai:gpt-4.1 Coll.,openai:gpt-4.1 Steps,Row,Spawn,Goal Room,Goal Target,Seeds,oracle Model,oracle Shield,oracle Prompt Hash,oracle Git SHA,openai:gpt-4.1 Model,openai:gpt-4.1 Shield,openai:gpt-4.1 Prompt Hash,openai:gpt-4.1 Git SHA
-Living Room and Kitchen,Go to the bathroom,2/2,0,0,0/2,1,1,lr-bath,living_room,bathroom,,137425804 154771838,ground-truth,off,abc123,deadbeef,gpt-4.1-2025-04-14,geometry,abc123,deadbeef
-Living Room and Kitchen,Find the refrigerator,2/2,0,0,1/2,0,0,lr-fridge,living_room,living_room,refrigerator,532932306 744551649,ground-truth,off,abc123,deadbeef,gpt-4.1-2025-04-14,geometry,abc123,deadbeef
-Bedroom,Find the mirror in the bedroom,2/2,0,0,1/1,0,0,bed-mirror,bedroom,bedroom,mirror,1414435921 998840480,ground-truth,off,abc123,deadbeef,gpt-4.1-2025-04-14,geometry,abc123,deadbeef
-"""
-
-GOLDEN_TEX = """\
-% Generated by vln-pilot bench; needs \\usepackage{booktabs} and \\usepackage{multirow}.
-\\begin{table}[ht]
-\\centering
-\\caption{Bench golden: achievements (successes/repetitions), collisions and episodes that reached the step limit, grouped by starting room.}
-\\label{tab:bench-golden}
-\\begin{tabular}{lp{4.2cm}cccccc}
-\\toprule
-\\textbf{Starting Room} & \\textbf{Query} & \\multicolumn{3}{c}{\\textbf{oracle}} & \\multicolumn{3}{c}{\\textbf{openai:gpt-4.1}} \\\\
-\\cmidrule(lr){3-5}\\cmidrule(lr){6-8}
- & & \\textbf{Ach.} & \\textbf{Coll.} & \\textbf{Steps} & \\textbf{Ach.} & \\textbf{Coll.} & \\textbf{Steps} \\\\
-\\midrule
-\\multirow{2}{*}{Living Room and Kitchen} & Go to the bathroom & 2/2 & -- & -- & 0/2 & 1 & 1 \\\\
- & Find the refrigerator & 2/2 & -- & -- & 1/2 & -- & -- \\\\
-\\midrule
-Bedroom & Find the mirror in the bedroom & 2/2 & -- & -- & 1/1 & -- & -- \\\\
-\\bottomrule
-\\end{tabular}
-
-\\smallskip
-\\footnotesize Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; Steps = episodes that reached the step limit; -- = none.\\\\
-Provenance: oracle: model ground-truth, shield off, prompt hash abc123, git SHA deadbeef; openai:gpt-4.1: model gpt-4.1-2025-04-14, shield geometry, prompt hash abc123, git SHA deadbeef; seeds: per repetition, sha256 of (base seed 7, row, repetition); listed per row in table.csv; 11/12 episodes finished (incomplete: rerun the bench with --resume); config hash 0123456789abcdef.
-\\end{table}
-
-\\begin{table}[ht]
-\\centering
-\\caption{Bench golden: summary per pilot. Success rate with its 95\\% Wilson interval, SPL, mean steps, collisions, step limits reached, false successes, invalid decisions, oscillations, safety-layer interventions, tokens, cost and pilot-call latency.}
-\\label{tab:bench-golden-summary}
-\\small
-\\begin{tabular}{lrrrrrrrrrrrrrr}
-\\toprule
-Pilot & Success & 95\\% CI & SPL & Steps & Coll. & Exc. & False & Invalid & Osc. & Interv. & Tokens in/out & Cost (\\$) & p50 (s) & p95 (s) \\\\
-\\midrule
-oracle & 6/6 & 61.0--100.0\\% & 0.900 & 20.3 & 0 & 0 & 0 & 0 & 0 & 0 & 0/0 & 0.0000 & 0.002 & 0.002 \\\\
-openai:gpt-4.1 & 2/5 & 11.8--76.9\\% & 0.250 & 12.8 & 1 & 1 & 1 & 1 & 3 & 2 & 5000/500 & 0.0500 & 1.900 & 2.825 \\\\
-\\bottomrule
-\\end{tabular}
-\\end{table}
-"""
-
-GOLDEN_SUMMARY_CSV = """\
-pilot,model,episodes,successes,success_rate,ci95_low,ci95_high,spl,mean_steps,collisions,steps_exceeded,false_successes,pilot_errors,invalid_decisions,oscillations,interventions,input_tokens,output_tokens,cost_usd,pilot_calls,latency_p50_s,latency_p95_s,shield,prompt_hash,git_sha
-oracle,ground-truth,6,6,1.0000,0.6097,1.0000,0.9000,20.33,0,0,0,0,0,0,0,0,0,0.000000,12,0.0015,0.0020,off,abc123,deadbeef
-openai:gpt-4.1,gpt-4.1-2025-04-14,5,2,0.4000,0.1176,0.7693,0.2500,12.80,1,1,1,0,1,3,2,5000,500,0.050000,8,1.9000,2.8250,geometry,abc123,deadbeef
-"""
-
-
-def test_tables_render_from_a_fixed_results_file_exactly(tmp_path: Path):
-    suite = suite_from_dict(GOLDEN_SUITE)
-    results = tmp_path / "results.jsonl"
-    results.write_text("".join(json.dumps(r) + "\n" for r in golden_records()))
-    tables = render_tables(suite, PILOTS, ResultsLog(results).read(), "0123456789abcdef")
-    assert tables["table.md"] == GOLDEN_MD
-    assert tables["table.csv"] == GOLDEN_CSV
-    assert tables["table.tex"] == GOLDEN_TEX
-    assert tables["summary.csv"] == GOLDEN_SUMMARY_CSV
 
 
 # ------------------------------------------------------------------------------------------------ executors

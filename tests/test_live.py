@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import sys
 import threading
 from pathlib import Path
+from types import SimpleNamespace
 
 import httpx
 import pytest
@@ -13,7 +15,9 @@ import pytest
 from live_episode import LiveEpisode
 from vlnpilot import cli
 from vlnpilot.episode import OUTCOMES
+from vlnpilot.live import app as live_app
 from vlnpilot.live.control import LiveControl, Refused
+from vlnpilot.live.feed import RunFeed
 from vlnpilot.live.station import LiveStation
 from vlnpilot.record import load_run
 from vlnpilot.scene import load_scene
@@ -113,6 +117,33 @@ def test_watch_streams_a_finished_run_read_only(tmp_path: Path) -> None:
         assert httpx.get(f"{station.url}frames/front_001.jpg", timeout=10).status_code == 200
         assert httpx.get(f"{station.url}frames/..%2Fsummary.json", timeout=10).status_code == 404
         assert httpx.get(f"{station.url}plan.png", timeout=10).headers["content-type"] == "image/png"
+
+
+def test_a_step_written_while_the_stream_waits_goes_out_after_one_poll(tmp_path: Path,
+                                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    """The page's 1 s to show a finished step, without a clock: the event stream sends a step written while it
+    waits right after that one wait of POLL_S, and POLL_S leaves most of the second to the page."""
+    episode = tmp_path / "episode.jsonl"
+    episode.write_text(json.dumps({"step": 1}) + "\n")
+    waits: list[float] = []
+
+    async def sleep(seconds: float) -> None:  # the step ends while the stream waits
+        waits.append(seconds)
+        with episode.open("a") as f:
+            f.write(json.dumps({"step": len(waits) + 1}) + "\n")
+
+    async def connected() -> bool:
+        return False
+
+    monkeypatch.setattr(live_app, "asyncio", SimpleNamespace(sleep=sleep))
+    stream = live_app._stream(SimpleNamespace(is_disconnected=connected), RunFeed(tmp_path), None)
+
+    async def first_events(n: int) -> list[str]:
+        return [await anext(stream) for _ in range(n)]
+
+    events = asyncio.run(first_events(2))
+    assert [json.loads(e.split("data: ", 1)[1])["step"] for e in events] == [1, 2]
+    assert waits == [live_app.POLL_S] and live_app.POLL_S <= 0.25
 
 
 def test_watch_of_a_directory_without_a_run_is_one_line(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,

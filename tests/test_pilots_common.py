@@ -74,12 +74,14 @@ def test_missing_price_file_is_a_config_error(tmp_path):
 
 # ------------------------------------------------------------------------------------------------ retries
 
-def test_parse_retry_after():
+def test_parse_retry_after(monkeypatch: pytest.MonkeyPatch):
     assert parse_retry_after({"retry-after": "2"}) == 2.0
     assert parse_retry_after({"retry-after": "0.25"}) == 0.25
     assert parse_retry_after({"retry-after-ms": "150", "retry-after": "9"}) == 0.15
-    date = email.utils.formatdate(time.time() + 30, usegmt=True)
-    assert 25 < parse_retry_after({"retry-after": date}) <= 31
+    now = 1_700_000_000.0
+    monkeypatch.setattr(time, "time", lambda: now)  # an HTTP date is read against the clock: a fixed one here
+    assert parse_retry_after({"retry-after": email.utils.formatdate(now + 30, usegmt=True)}) == 30.0
+    assert parse_retry_after({"retry-after": email.utils.formatdate(now - 30, usegmt=True)}) == 0.0  # past
     assert parse_retry_after({"retry-after": "soon"}) is None
     assert parse_retry_after({}) is None and parse_retry_after(None) is None
 

@@ -182,21 +182,6 @@ def test_seeded_spawn_jitter_is_reproducible():
     assert a[0].pose != c[0].pose
 
 
-# -- ground truth ------------------------------------------------------------------------------------------------
-def test_each_target_is_visible_from_in_front_and_not_from_behind(sim):
-    for target in sim.scene.targets:
-        fx, fy = math.cos(math.radians(target.facing_deg)), math.sin(math.radians(target.facing_deg))
-        x, y = target.position[0] + 0.8 * fx, target.position[1] + 0.8 * fy
-        sim.reset(Pose(x, y, sim.scene.flight_altitude, target.facing_deg + 180.0))
-        gt = sim.ground_truth()
-        assert gt.room() == target.room
-        assert gt.target_visible(target.id), target.id
-        distance, bearing = gt.target_distance_bearing(target.id)
-        assert distance == pytest.approx(0.8, abs=1e-6) and bearing == pytest.approx(0.0, abs=1e-6)
-        sim.reset(Pose(x, y, sim.scene.flight_altitude, target.facing_deg))
-        assert not sim.ground_truth().target_visible(target.id), target.id
-
-
 # -- the drone ---------------------------------------------------------------------------------------------------
 def test_tello_size_from_the_collision_geometry(geo_sim):
     m = geo_sim.model

@@ -59,7 +59,7 @@ def test_auto_land_after_15_s_without_a_command_and_the_battery_drains() -> None
         assert emu.flying and not emu.auto_landed.is_set()
         assert emu.battery == pytest.approx(100 - 14.0 * emu.config.battery_drain_pct_per_s)
         clock.sleep(15.5)
-        assert wait_for(emu.auto_landed.is_set)  # the state thread notices the silence
+        assert emu.auto_landed.wait(timeout=10)  # the state thread notices the silence
         assert not emu.flying and "auto_land" in emu.log.events
 
 

@@ -51,7 +51,6 @@ class RecordedRequest:
     image_media_types: list[str] = field(default_factory=list)
     schema: dict | None = None  # the answer schema the client asked for (None in plain JSON mode)
     parts: list[str] = field(default_factory=list)  # kinds of the user parts in order: "text" / "image"
-    received_at: float = 0.0
 
     @property
     def text(self) -> str:
@@ -292,7 +291,7 @@ class FakeServer:
             data = None
         req = RecordedRequest(method=h.command, path=split.path, query=parse_qs(split.query),
                               headers={k.lower(): v for k, v in h.headers.items()}, body=body, json=data,
-                              model=model or None, received_at=time.monotonic())
+                              model=model or None)
         if isinstance(data, dict):
             try:
                 self._parse(req)

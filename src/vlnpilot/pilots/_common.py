@@ -172,12 +172,13 @@ def call_with_retries(
     base_delay: float = 0.5,
     max_delay: float = 8.0,
     what: str = "request",
-    sleep: Callable[[float], None] = time.sleep,
+    sleep: Callable[[float], None] | None = None,
 ) -> T:
     """Call `fn`, retrying up to `max_retries` times when `classify(exc)` says (retry, retry_after_s).
 
     A server-given Retry-After is honoured (up to MAX_RETRY_AFTER_S; longer means no retry),
-    otherwise the delay is capped exponential backoff.
+    otherwise the delay is capped exponential backoff. `sleep` defaults to `time.sleep` looked up at each wait,
+    so that a test can stand in for it as it does for the SDKs' own retry waits.
     """
     attempt = 0
     while True:
@@ -195,7 +196,7 @@ def call_with_retries(
                 delay = backoff_delay(attempt, base_delay, max_delay)
             attempt += 1
             log.info("%s failed (%s); retry %d/%d in %.2f s", what, type(exc).__name__, attempt, max_retries, delay)
-            sleep(delay)
+            (sleep or time.sleep)(delay)
 
 
 def status_error(provider: str, status: int, message: str, *, key_env: str, model: str | None,
