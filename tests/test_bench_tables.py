@@ -168,6 +168,12 @@ def test_latex_escapes_every_special_character(odd):
         assert body.count("{") == body.count("}"), line
 
 
+def test_latex_labels_are_plain_keys(odd):
+    """\\label{} takes a key, not text: an escape such as \\_ or \\& inside it breaks the document."""
+    labels = re.findall(r"\\label\{([^}]*)\}", odd["table.tex"])
+    assert labels == ["tab:bench-r-d-50-", "tab:bench-r-d-50--summary"]
+
+
 def test_latex_columns_follow_the_pilots(odd):
     tex = odd["table.tex"]
     assert r"\begin{tabular}{lp{4.2cm}cccccc}" in tex  # Starting Room, Query, then Ach./Coll./Steps per pilot

@@ -108,12 +108,14 @@ def test_timeline_reads_the_keys_the_step_record_writes(tmp_path: Path, monkeypa
     run = make_run(tmp_path / "r", steps=2)
     lines = [json.loads(line) for line in (run / "episode.jsonl").read_text().splitlines()]
     every_key = dict.fromkeys(episode_record.step_keys(), None)
+    raw = {key: f"recorded {key}" for key in SHOWN_RAW}
     for rec in lines:
-        rec.update({**every_key, **rec, "wind_mps": 0.3, "override": "fallback", "vendor_note": "from elsewhere"})
+        rec.update({**every_key, **rec, **raw, "wind_mps": 0.3, "vendor_note": "from elsewhere"})
+    lines[1]["override"] = None  # written on every step, set on few: nothing to show when it is null
     (run / "episode.jsonl").write_text("".join(json.dumps(rec) + "\n" for rec in lines))
-    for entry in load_episode(run).entries[:-1]:
-        assert set(entry.extra) == {*SHOWN_RAW, "vendor_note"}
-        assert entry.extra["override"] == "fallback"
+    first, second = load_episode(run).entries[:2]
+    assert set(first.extra) == {*SHOWN_RAW, "vendor_note"} and first.extra["override"] == "recorded override"
+    assert set(second.extra) == {*SHOWN_RAW, "vendor_note"} - {"override"}
 
 
 def test_episode_video(run: Path) -> None:

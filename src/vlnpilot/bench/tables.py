@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from collections.abc import Sequence
 from itertools import groupby
 from typing import Any
@@ -196,6 +197,12 @@ def tex_escape(text: str) -> str:
     return "".join(_TEX_ESCAPES.get(ch, ch) for ch in str(text))
 
 
+def _label(name: str) -> str:
+    """A suite name as a LaTeX label key: escapes such as \\_ do not belong inside \\label{}, so other
+    characters than letters, digits, '-', ':' and '.' become '-'."""
+    return re.sub(r"[^A-Za-z0-9:.-]+", "-", name)
+
+
 def render_tex(data: _Data, config_hash: str | None = None) -> str:
     """Two booktabs tables (needs \\usepackage{booktabs,multirow}): Table 4's layout, then the summary."""
     n = len(data.pilots)
@@ -205,7 +212,7 @@ def render_tex(data: _Data, config_hash: str | None = None) -> str:
         r"\begin{table}[ht]", r"\centering",
         r"\caption{Bench " + e(data.suite.name) + r": achievements (successes/repetitions), collisions and "
         r"episodes that reached the step limit, grouped by starting room.}",
-        r"\label{tab:bench-" + e(data.suite.name) + "}",
+        r"\label{tab:bench-" + _label(data.suite.name) + "}",
         r"\begin{tabular}{lp{4.2cm}" + "ccc" * n + "}", r"\toprule",
         r"\textbf{Starting Room} & \textbf{Query} & "
         + " & ".join(r"\multicolumn{3}{c}{\textbf{" + e(p) + "}}" for p in data.pilots) + r" \\",
@@ -229,7 +236,7 @@ def render_tex(data: _Data, config_hash: str | None = None) -> str:
               r"\caption{Bench " + e(data.suite.name) + r": summary per pilot. Success rate with its 95\% Wilson "
               r"interval, SPL, mean steps, collisions, step limits reached, false successes, invalid decisions, "
               r"oscillations, safety-layer interventions, tokens, cost and pilot-call latency.}",
-              r"\label{tab:bench-" + e(data.suite.name) + "-summary}", r"\small",
+              r"\label{tab:bench-" + _label(data.suite.name) + "-summary}", r"\small",
               r"\begin{tabular}{l" + "r" * (len(cols) - 1) + "}", r"\toprule",
               " & ".join(str(c.tex) for c in cols) + r" \\", r"\midrule"]
     lines += [" & ".join(c.tex_cell(s) for c in cols) + r" \\" for s in data.summaries()]

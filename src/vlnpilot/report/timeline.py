@@ -175,7 +175,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
             frames=_existing(run_dir, prev_frames),
             oscillation_event=rec.get("oscillation_event") or None,
             feedback=[str(f) for f in rec.get("safety_feedback") or []],
-            extra={k: v for k, v in rec.items() if k not in known},
+            extra={k: v for k, v in rec.items() if k not in known and v is not None},  # `override: null` says nothing
         ))
         prev_frames = rec.get("frames") or {}
         prev_room = rec.get("room_true")
