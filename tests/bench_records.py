@@ -1,6 +1,18 @@
-"""A bench results line as the runner writes it, with only the fields a test cares about to choose."""
+"""Bench test material: a tiny two-row suite, and a results line as the runner writes it, with only the fields a
+test cares about to choose."""
 
 from __future__ import annotations
+
+# Two rows of the cabin, two repetitions: the smallest bench that still has rows, repetitions and a goal.
+TINY = """\
+name: tiny
+repetitions: 2
+max_steps: 30
+seed: 3
+rows:
+  - {id: to-bedroom, spawn: living_room, query: Go to the bedroom, goal: bedroom}
+  - {id: stay, spawn: bathroom, query: Go to the bathroom}
+"""
 
 
 def bench_record(pilot: str, row: str, rep: int, outcome: str, *, steps: int = 10, spl: float | None = None,

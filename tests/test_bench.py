@@ -15,7 +15,7 @@ from pathlib import Path
 import pytest
 from rich.console import Console
 
-from bench_records import bench_record
+from bench_records import TINY, bench_record
 from vlnpilot.bench import (
     BenchError,
     BenchSettings,
@@ -35,16 +35,6 @@ from vlnpilot.bench.runner import config_hash
 from vlnpilot.bench.suite import suite_from_dict
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.tasks import spl
-
-TINY = """\
-name: tiny
-repetitions: 2
-max_steps: 30
-seed: 3
-rows:
-  - {id: to-bedroom, spawn: living_room, query: Go to the bedroom, goal: bedroom}
-  - {id: stay, spawn: bathroom, query: Go to the bathroom}
-"""
 
 
 @pytest.fixture

@@ -16,6 +16,7 @@ from typing import Any
 import pytest
 
 import vlnpilot.episode_measures as episode_measures
+from bench_records import TINY
 from vlnpilot.bench import BenchSettings, run_bench
 from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
 from vlnpilot.episode_measures import (
@@ -115,17 +116,6 @@ def test_the_result_keeps_its_recorded_layout_and_reads_back_from_its_dict() -> 
     assert EpisodeResult(**result.to_dict()) == result
     with pytest.raises(AttributeError):
         result.spl = 1.0  # type: ignore[misc]  # frozen
-
-
-TINY = """\
-name: tiny
-repetitions: 2
-max_steps: 30
-seed: 3
-rows:
-  - {id: to-bedroom, spawn: living_room, query: Go to the bedroom, goal: bedroom}
-  - {id: stay, spawn: bathroom, query: Go to the bathroom}
-"""
 
 
 def test_a_new_metric_touches_one_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
