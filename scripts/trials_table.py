@@ -16,7 +16,7 @@ from vlnpilot.bench.results import wilson_interval
 
 OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
 LABELS = {"baseline": "before (baseline)", "after-paper": "after, paper context", "after-plus": "after, plus context",
-          "houses-plus": "unseen houses, plus context"}
+          "houses-paper": "unseen houses, paper context", "houses-plus": "unseen houses, plus context"}
 
 
 def load(root: Path) -> dict[str, list[dict]]:
