@@ -71,6 +71,18 @@ def test_the_context_reaches_the_prompt() -> None:
 
     text = build_prompt(sample_input(S.GO_THROUGH_DOOR, context=ctx.lines(3))).step_text
     assert "## Pilot context" in text and "- Step budget: this is step 3 of 50" in text
+    assert "dead-reckoned from the executed commands" in text  # explained where it appears
+
+
+def test_the_paper_context_never_mentions_a_pilot_context() -> None:
+    """Under the paper's five inputs there is no pilot context: no prompt text may announce one (real pilots
+    flying the paper context waited for the odometry the system prompt said 'may follow')."""
+    from fakes.inputs import sample_input
+
+    for state in (S.RECOGNIZE_ROOM, S.GO_THROUGH_DOOR, S.REACH_OBJECT):
+        prompt = build_prompt(sample_input(state, context=PilotContext(context_preset("paper"), 50).lines(3)))
+        for text in (prompt.system, prompt.context, prompt.state_prompt, prompt.step_text):
+            assert "pilot context" not in text.lower() and "odometry" not in text.lower()
 
 
 class Hesitant:

@@ -247,7 +247,9 @@ def _step_text(state: State, previous_movement: str | None, step: int, feedback:
     if context:
         nested = ("  - " if line.startswith(" ") else "- " for line in context)  # memory items nest
         items = zip(nested, context, strict=True)
-        text += "\n## Pilot context\n" + "".join(f"{b}{line.strip()}\n" for b, line in items)
+        # explained where it appears, never in the system prompt: under the paper's inputs it does not exist
+        text += "\n## Pilot context\n" + _template("pilot_context.md").strip() + "\n" + \
+            "".join(f"{b}{line.strip()}\n" for b, line in items)
     lines = [" ".join(str(line).split()) for line in feedback if line and str(line).strip()]
     if lines:
         text += "\n## Controller feedback\n" + "\n".join(f"- {line}" for line in lines) + "\n"
@@ -335,7 +337,7 @@ def prompt_hash(profile: str = "paper") -> str:
     sample_map = {"edges": [{"from": "a", "to": "b"}], "nodes": [{"id": "a", "name": "A"}, {"id": "b", "name": "B"}]}
     parts = [system_prompt(), _context("query", sample_map)]
     for state in ASKED_STATES:
-        parts += [render_state_prompt(state, profile), _step_text(state, "A1", 1, ("feedback",))]
+        parts += [render_state_prompt(state, profile), _step_text(state, "A1", 1, ("feedback",), ("context",))]
         parts.append(json.dumps(decision_schema(state, profile, ["a", "b"]), sort_keys=True))
     for part in parts:
         h.update(part.encode("utf-8") + b"\x00")
