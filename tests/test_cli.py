@@ -83,6 +83,8 @@ BAD_INPUT = [
     (["run", "Go to the bedroom", "--pilot", "oracle", "--pilot-option", "approach_m"], ["takes KEY=VALUE"]),
     (["bench", "--pilots", "oracle", "--pilot-option", "detail=high"],
      ["--pilot-option 'detail' is taken by none of the pilots oracle", "valid keys: approach_m"]),
+    (["bench", "--plugin", "no_such_module_here"], ["cannot import plugin module 'no_such_module_here'"]),
+    (["bench", "--executor", "slurm"], ["unknown executor 'slurm'; valid executors: local, ray, inline"]),
 ]
 
 
@@ -230,3 +232,44 @@ def test_default_pilot_spec_reads_the_environment(monkeypatch: pytest.MonkeyPatc
     assert cli.default_pilot_spec()[0] == "oracle"
     monkeypatch.setenv("GEMINI_API_KEY", FAKE_KEY)
     assert cli.default_pilot_spec()[0] == "gemini"
+
+
+PLUGIN = """
+from vlnpilot.bench import register_executor
+from vlnpilot.bench.episode_job import Event, SimulatorCache, run_guarded
+
+
+@register_executor("one-by-one")
+class OneByOne:
+    describe = "one by one (a plugin)"
+
+    def __init__(self, options):
+        pass
+
+    def run(self, specs):
+        sims = SimulatorCache()
+        for spec in specs:
+            yield Event("started", spec.key)
+            record, error = run_guarded(spec, sims)
+            yield Event("finished" if error is None else "failed", spec.key, record, error)
+        sims.close_thread()
+
+    def close(self):
+        pass
+"""
+
+
+def test_a_plugin_registers_an_executor_the_command_line_can_use(monkeypatch: pytest.MonkeyPatch,
+                                                                  capsys: pytest.CaptureFixture[str],
+                                                                  tmp_path: Path) -> None:
+    from bench_records import TINY
+
+    (tmp_path / "my_executor_plugin.py").write_text(PLUGIN)
+    (tmp_path / "tiny.yaml").write_text(TINY)
+    monkeypatch.syspath_prepend(str(tmp_path))
+    out = tmp_path / "b"
+    code, _, err = run_main(monkeypatch, capsys, "bench", "--suite", str(tmp_path / "tiny.yaml"), "--plugin",
+                            "my_executor_plugin", "--executor", "one-by-one", "--out", str(out), "--no-report")
+    assert code == 0, err
+    assert "one by one (a plugin)" in " ".join(err.split())  # the console wraps long lines
+    assert len((out / "results.jsonl").read_text().splitlines()) == 4

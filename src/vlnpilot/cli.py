@@ -281,7 +281,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1)] = None,
           workers: Annotated[int | None, typer.Option("--workers", min=1, help="Episodes in flight.")] = None,
-          executor: Annotated[str, typer.Option("--executor", help="local or ray.")] = "local",
+          executor: Annotated[str, typer.Option("--executor", help="local, ray, inline or one a --plugin "
+                                                "registers.")] = "local",
           ray_address: Annotated[str | None, typer.Option("--ray-address")] = None,
           out: OutOpt = None,
           resume: Annotated[bool, typer.Option("--resume", help="Run only the episodes missing in --out.")] = False,
@@ -293,7 +294,10 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           = None,
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
           context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
-          report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True) -> None:
+          report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+          plugin: Annotated[list[str] | None, typer.Option(
+              "--plugin", help="A module to import first, in every worker too: it may register pilots and "
+              "executors. Repeatable.")] = None) -> None:
     """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report.
 
     Exit code 0 when every episode was flown to an outcome, 3 when any ended in pilot_error, 2 for bad input."""
@@ -309,7 +313,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=check_base_url(base_url), shield=shield or DEFAULT_SHIELD,
-                              episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()))
+                              episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
+                              plugins=tuple(plugin or ()))
     if report:
         from vlnpilot.report.html import write_bench_report
 

@@ -119,12 +119,13 @@ class TimedPilot:
 
 
 def import_plugins(plugins: Sequence[str]) -> None:
-    """Import modules that register extra pilots (`@register_pilot`), in a worker or in the parent."""
+    """Import modules that register extra pilots or executors (`@register_pilot`, `@register_executor`), in a
+    worker or in the parent."""
     for module in plugins:
         try:
             importlib.import_module(module)
         except ImportError as exc:
-            raise ConfigError(f"cannot import pilot plugin module {module!r}: {exc}") from None
+            raise ConfigError(f"cannot import plugin module {module!r}: {exc}") from None
 
 
 def _pilot_options(spec: EpisodeSpec) -> dict[str, Any]:
