@@ -1,6 +1,7 @@
 """The real-VLM trials as tables: outcomes per set (the README's before/after table) and one line per trial.
 
     python scripts/trials_table.py [trials]            # markdown on stdout
+    python scripts/trials_table.py --write [trials]    # the same tables into README.md and trials/README.md
 
 Reads only trials/SET/ROW/trial.json, so every figure in the README comes from the committed trials.
 """
@@ -15,8 +16,15 @@ from pathlib import Path
 from vlnpilot.bench.results import wilson_interval
 
 OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
-LABELS = {"baseline": "before (baseline)", "after-paper": "after, paper context", "after-plus": "after, plus context",
-          "houses-paper": "unseen houses, paper context", "houses-plus": "unseen houses, plus context"}
+LABELS = {  # the sets in the order the tables list them (a set not named here comes last)
+    "baseline": "before (baseline)", "after-paper": "after, paper context", "after-plus": "after, plus context",
+    "houses-paper": "unseen houses, paper context", "houses-plus": "unseen houses, plus context",
+    "houses-multidoor": "unseen houses, two doors, plus context",
+}
+
+
+def _order(name: str) -> tuple[int, str]:
+    return (list(LABELS).index(name) if name in LABELS else len(LABELS), name)
 
 
 def load(root: Path) -> dict[str, list[dict]]:
@@ -29,7 +37,7 @@ def load(root: Path) -> dict[str, list[dict]]:
 def summary_table(sets: dict[str, list[dict]]) -> str:
     lines = ["| trials | context | scene | episodes | success (95% CI) | false success | collisions | "
              "steps exceeded | mean steps |", "|---|---|---|---|---|---|---|---|---|"]
-    for name in sorted(sets, key=lambda n: (n != "baseline", n)):
+    for name in sorted(sets, key=_order):
         trials = sets[name]
         n = len(trials)
         count = {o: sum(t["outcome"] == o for t in trials) for o in OUTCOMES}
@@ -45,7 +53,7 @@ def summary_table(sets: dict[str, list[dict]]) -> str:
 
 def row_table(sets: dict[str, list[dict]]) -> str:
     """Successes per paper-suite row and set (the rows of the paper's Table 4; the houses are not its rows)."""
-    names = sorted((n for n in sets if not n.startswith("houses")), key=lambda n: (n != "baseline", n))
+    names = sorted((n for n in sets if not n.startswith("houses")), key=_order)
     per: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
     for name in names:
         for t in sets[name]:
@@ -62,15 +70,35 @@ def row_table(sets: dict[str, list[dict]]) -> str:
 
 def trial_lines(sets: dict[str, list[dict]]) -> str:
     lines = ["| trials | row | outcome | steps | prompt version | flown |", "|---|---|---|---|---|---|"]
-    for name in sorted(sets, key=lambda n: (n != "baseline", n)):
+    for name in sorted(sets, key=_order):
         for t in sets[name]:
             lines.append(f"| {name} | {t['row']} | {t['outcome']} | {t['steps']} | {t['prompt_hash']} | "
                          f"{t['started_at'][:16]} |")
     return "\n".join(lines)
 
 
+def replace_table(text: str, table: str) -> str:
+    """`text` with the Markdown table that has `table`'s header line replaced by `table`."""
+    start = text.index(table.splitlines()[0])
+    end = text.find("\n\n", start)
+    return text[:start] + table + (text[end:] if end >= 0 else "\n")
+
+
+def write_readmes(root: Path) -> None:
+    """Put the tables into README.md (summary, rows) and trials/README.md (one line per trial)."""
+    sets = load(root)
+    readme = root.parent / "README.md"
+    text = replace_table(replace_table(readme.read_text(), summary_table(sets)), row_table(sets))
+    readme.write_text(text)
+    (root / "README.md").write_text(replace_table((root / "README.md").read_text(), trial_lines(sets)))
+
+
 def main() -> None:
-    root = Path(sys.argv[1] if len(sys.argv) > 1 else "trials")
+    args = [a for a in sys.argv[1:] if a != "--write"]
+    root = Path(args[0] if args else "trials")
+    if "--write" in sys.argv[1:]:
+        write_readmes(root)
+        return
     sets = load(root)
     print(summary_table(sets))
     print()
