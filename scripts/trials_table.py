@@ -19,7 +19,8 @@ OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
 LABELS = {  # the sets in the order the tables list them (a set not named here comes last)
     "baseline": "before (baseline)", "after-paper": "after, paper context", "after-plus": "after, plus context",
     "houses-paper": "unseen houses, paper context", "houses-plus": "unseen houses, plus context",
-    "houses-multidoor": "unseen houses, two doors, plus context",
+    "houses-long": "unseen houses, longer routes, plus context",
+    "houses-fast": "unseen houses, longer routes, plus context, fast profile",
 }
 
 

@@ -10,13 +10,12 @@ prompts does).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from vlnpilot.prompting import render_state_prompt, system_prompt
 from vlnpilot.sim import Simulator
+from vlnpilot.sim.target_views import facing_view, free_standpoint, view, width_fraction
 from vlnpilot.success import OBJECT_CLOSE_WIDTH_FRACTION, SuccessConfig, visual_cue_values
 from vlnpilot.types import Pose
 
@@ -36,35 +35,8 @@ def sims():
         yield {"cabin": v2, "cabin-v1": v1}
 
 
-def _free_standpoint(sim: Simulator, target_id: str, distance: float) -> bool:
-    """Can the drone hover `distance` in front of the target, in its room, touching nothing?"""
-    t = sim.scene.target(target_id)
-    a = math.radians(t.facing_deg)
-    x, y = t.position[0] + distance * math.cos(a), t.position[1] + distance * math.sin(a)
-    pose = Pose(x, y, sim.scene.flight_altitude, t.facing_deg + 180.0)
-    return sim.scene.room_at(x, y) == t.room and sim.contact_at(pose) is None
-
-
-def _view(sim: Simulator, x: float, y: float, yaw: float) -> np.ndarray:
-    sim.reset(Pose(x, y, sim.scene.flight_altitude, yaw))
-    return sim.segmentation()
-
-
-def _facing(sim: Simulator, target_id: str, distance: float) -> np.ndarray:
-    """The segmentation from `distance` in front of the target, on its facing axis, looking at it."""
-    t = sim.scene.target(target_id)
-    a = math.radians(t.facing_deg)
-    return _view(sim, t.position[0] + distance * math.cos(a), t.position[1] + distance * math.sin(a),
-                 t.facing_deg + 180.0)
-
-
 def _ids(sim: Simulator, prefix: str) -> list[int]:
     return [i for i in range(sim.model.ngeom) if sim.geom_name(i).startswith(prefix)]
-
-
-def _width_fraction(seg: np.ndarray, ids) -> float:
-    cols = np.flatnonzero(np.isin(seg, list(ids)).any(axis=0))
-    return 0.0 if cols.size == 0 else (cols[-1] - cols[0] + 1) / seg.shape[1]
 
 
 def _floor_at_bottom(sim: Simulator, seg: np.ndarray, ids) -> bool:
@@ -76,9 +48,9 @@ def _floor_at_bottom(sim: Simulator, seg: np.ndarray, ids) -> bool:
 
 def object_looks_close(sim: Simulator, target_id: str, distance: float) -> bool:
     """The Reach Object stop rule, evaluated on a render: wide enough and no floor in front."""
-    seg = _facing(sim, target_id, distance)
+    seg = facing_view(sim, target_id, distance)
     ids = sim.target_geoms[target_id]
-    return _width_fraction(seg, ids) >= OBJECT_CLOSE_WIDTH_FRACTION and not _floor_at_bottom(sim, seg, ids)
+    return width_fraction(seg, ids) >= OBJECT_CLOSE_WIDTH_FRACTION and not _floor_at_bottom(sim, seg, ids)
 
 
 TARGETS = ["refrigerator", "mirror", "sink"]
@@ -97,7 +69,7 @@ def test_stop_rule_fails_beyond_the_success_distance(sims, target_id: str, facto
     """A pilot that obeys the rule never declares too early: no target passes it from beyond the distance."""
     checked = 0
     for name, sim in sims.items():
-        if not _free_standpoint(sim, target_id, factor * SUCCESS_M):
+        if not free_standpoint(sim, target_id, factor * SUCCESS_M):
             continue  # the room is too shallow, or furniture stands there
         assert not object_looks_close(sim, target_id, factor * SUCCESS_M), f"{name} {target_id}: 'close' at {factor}x"
         checked += 1
@@ -108,7 +80,7 @@ def test_stop_rule_fails_beyond_the_success_distance(sims, target_id: str, facto
 def test_height_is_no_distance_cue(sims) -> None:
     """Why the old rule ("a third of the width or height") failed: a fridge fills the height from 2 m."""
     sim, target_id = sims["cabin"], "refrigerator"
-    seg = _facing(sim, target_id, 2 * SUCCESS_M)
+    seg = facing_view(sim, target_id, 2 * SUCCESS_M)
     rows = np.flatnonzero(np.isin(seg, list(sim.target_geoms[target_id])).any(axis=1))
     assert (rows[-1] - rows[0] + 1) / seg.shape[0] > 0.5
 
@@ -125,7 +97,8 @@ def _door_frame_visible(sim: Simulator, door_id: str, before_m: float) -> tuple[
     """(left jamb visible, right jamb visible), centred on the doorway, `before_m` before its plane."""
     door = next(d for d in sim.scene.doors if d.id == door_id)
     nx, ny = door.normal
-    seg = _view(sim, door.center[0] - before_m * nx, door.center[1] - before_m * ny, door.normal_deg)
+    seg = view(sim, Pose(door.center[0] - before_m * nx, door.center[1] - before_m * ny, sim.scene.flight_altitude,
+                         door.normal_deg))
     return (bool(np.isin(seg, _ids(sim, f"{door_id}_frame_left")).any()),
             bool(np.isin(seg, _ids(sim, f"{door_id}_frame_right")).any()))
 
