@@ -23,14 +23,56 @@ DEFAULT_SUCCESS = SuccessConfig()
 
 
 # What the front camera shows inside the monitor's success distance, calibrated on our renders against
-# SuccessConfig (tests/test_calibration.py renders every target on its facing axis): at 0.7 of the success
-# distance every target spans at least this fraction of the image width, and at 1.1 and 2 times it every target
-# spans less. Wide objects decide the upper bound (a 0.84 m vanity spans 40 % from 1.5 m: the first real-VLM
-# trial of a 40 % rule stopped 1.37 m away), narrow ones the lower (a 0.72 m fridge spans 65 % from 0.79 m).
-OBJECT_CLOSE_WIDTH_FRACTION = 0.65
+# SuccessConfig (tests/test_calibration.py renders every target of the cabins and of a dozen houses on its facing
+# axis): how wide each kind of object must look for the drone to be within the success distance. At 0.7 of it
+# every target of a kind looks at least that wide, at 1.1 and 2 times it none does. One fraction cannot serve
+# every kind: a desk spans 65 % of the width from 1.1 m, a toilet never does within 1 m
+# (bench/object_width_cues.py measures it in 40 houses), so the rule names the kinds.
+OBJECT_CLOSE_WIDTH_FRACTION = 0.65  # a fridge, a mirror, a sink cabinet, and any kind not listed below
+FILLS_THE_WIDTH = 1.0  # "the whole width": both ends of the object outside the image
+
+
+@dataclass(frozen=True)
+class CloseCue:
+    """How wide objects of `kinds` must look (fraction of the image width) to be within the success distance;
+    `then_m`: fly this much further after that (objects so wide that they fill the image from beyond it)."""
+
+    kinds: tuple[str, ...]  # target kinds, as the scenes name them (`desk`, `tv`, ...)
+    shown_as: str  # how the prompt names them
+    width_fraction: float
+    then_m: float = 0.0
+
+
+OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
+    CloseCue(("toilet",), "a toilet", 0.25),
+    CloseCue(("plant",), "a potted plant", 0.35),
+    CloseCue(("stove",), "a stove", 0.50),
+    CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (with the cabinet under "
+             "it), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION),
+    CloseCue(("shower",), "a shower", 0.80),
+    CloseCue(("bookshelf",), "a bookshelf", 0.85),
+    CloseCue(("tv",), "a TV (with the cabinet it stands on)", FILLS_THE_WIDTH),
+    CloseCue(("bed", "desk", "wardrobe"), "a bed, a desk, a wardrobe, a sofa or anything wider", FILLS_THE_WIDTH,
+             then_m=0.5),
+)
+
+
+def close_cue(kind: str) -> CloseCue:
+    """The cue for a kind of object (`desk`; a numbered target id such as `desk_2` works too)."""
+    kind = kind.split("_")[0]
+    return next((c for c in OBJECT_CLOSE_CUES if kind in c.kinds), OBJECT_CLOSE_CUES[3])
+
+
+def _cue_text(cue: CloseCue) -> str:
+    if cue.width_fraction < FILLS_THE_WIDTH:
+        return f"{cue.shown_as}: {cue.width_fraction:.0%} of the image width".replace("%", " %")
+    then = (f", then about {cue.then_m:g} m further (about {round(cue.then_m / 0.1)} `A1`) or until the safety system "
+            "stops the drone") if cue.then_m else ""
+    return f"{cue.shown_as}: the whole width (both its ends outside the image){then}"
 
 
 def visual_cue_values(config: SuccessConfig = DEFAULT_SUCCESS) -> dict[str, str]:
     """The calibrated numbers that the prompts state, as template values (one source for prompt and test)."""
     return {"close_width_pct": f"{OBJECT_CLOSE_WIDTH_FRACTION:.0%}".replace("%", " %"),
+            "close_cues": "\n".join(f"  - {_cue_text(c)}" for c in OBJECT_CLOSE_CUES),
             "success_distance": f"{config.object_distance_m:g} m"}
