@@ -46,7 +46,7 @@ class CloseCue:
 OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
     CloseCue(("toilet",), "a toilet", 0.25),
     CloseCue(("plant",), "a potted plant", 0.35),
-    CloseCue(("stove",), "a stove", 0.50),
+    CloseCue(("stove",), "a stove (the cooktop and oven, not the counter beside them)", 0.50),
     CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (with the cabinet under "
              "it), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION),
     CloseCue(("shower",), "a shower", 0.80),
@@ -66,8 +66,9 @@ def close_cue(kind: str) -> CloseCue:
 def _cue_text(cue: CloseCue) -> str:
     if cue.width_fraction < FILLS_THE_WIDTH:
         return f"{cue.shown_as}: {cue.width_fraction:.0%} of the image width".replace("%", " %")
-    then = (f", then about {cue.then_m:g} m further (about {round(cue.then_m / 0.1)} `A1`) or until the safety system "
-            "stops the drone") if cue.then_m else ""
+    then = (f", then about {cue.then_m:g} m further straight ahead (about {round(cue.then_m / 0.1)} `A1`, or until "
+            "the safety system stops the drone): center its middle and face it squarely before its ends leave the "
+            "image, because they tell where its middle is") if cue.then_m else ""
     return f"{cue.shown_as}: the whole width (both its ends outside the image){then}"
 
 
