@@ -25,8 +25,9 @@ CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends t
                 "otherwise choose another state and movement.")
 _CONFIRM_WHY = {
     State.STAY_ON_ROOM: " (the drone is inside the goal room, not in or just before a doorway)",
-    State.DESCRIBE_OBJECT: " (measure again how much of the image width the whole object spans: the stop rule of "
-                           "Reach Object)",
+    State.DESCRIBE_OBJECT: " (what the monitor checks: the middle of the whole object is straight ahead, not "
+                           "a part of it; and it passes Reach Object's stop rule again, no floor in front of it "
+                           "and as wide as its kind must look)",
 }
 
 
