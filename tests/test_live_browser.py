@@ -61,6 +61,9 @@ def test_live_station_in_chromium(browser, tmp_path: Path) -> None:  # noqa: ANN
         ep.pilot.release(1)  # step 3 was already asked for when the pause came
         ep.wait_status(lambda s: s["holding"])
         page.wait_for_function("() => document.getElementById('mode').textContent === 'paused (holding)'")
+        # the pause's own reply may arrive after the stream's newer status: an older version never wins
+        page.evaluate("() => applyStatus({...status, holding: false, version: status.version - 1})")
+        assert page.locator("#mode").text_content() == "paused (holding)"
         ep.pilot.release(2)  # the pilot could answer twice, but the loop is held before asking it
         ep.wait_status(lambda s: s["holding"] and s["step"] == 4)
         assert ep.pilot.calls == 3 and len(ep.records) == 3

@@ -125,6 +125,13 @@ function renderStatus() {
   $("hfeedback").textContent = w && w.feedback.length ? w.feedback.join(" ") : "";
 }
 
+// The reply to a control message and the event stream both carry the status; whichever arrives last may be the
+// older one (a pause's reply after the stream said the loop is now holding), so the newest version wins.
+function applyStatus(next) {
+  if (!status || next.version >= status.version) status = next;
+  renderStatus();
+}
+
 async function control(action, extra = {}) {
   if (!connected || ended) { notice("not connected: nothing was sent"); return; }
   const headers = {"Content-Type": "application/json"};
@@ -133,7 +140,7 @@ async function control(action, extra = {}) {
     const r = await fetch("/api/control", {method: "POST", headers, body: JSON.stringify({run: meta.run, action, ...extra})});
     const body = await r.json();
     if (!r.ok) { notice(`${action} refused (${r.status}): ${body.error}`); return; }
-    status = body; notice(""); renderStatus();
+    applyStatus(body); notice("");
   } catch (e) { notice(`${action} not delivered: ${e}`); }  // never retried
 }
 
@@ -169,7 +176,7 @@ async function start() {
   };
   es.addEventListener("step", (ev) => { const r = JSON.parse(ev.data); steps.set(r.step, r); scheduleRender(); });
   es.addEventListener("summary", (ev) => { summary = JSON.parse(ev.data); renderHeader(); renderPlan(); });
-  es.addEventListener("status", (ev) => { status = JSON.parse(ev.data); renderStatus(); });
+  es.addEventListener("status", (ev) => applyStatus(JSON.parse(ev.data)));
   es.addEventListener("end", () => {
     ended = true; es.close(); $("conn").textContent = "run over"; $("conn").className = "badge"; renderStatus();
   });
