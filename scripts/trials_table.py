@@ -21,6 +21,7 @@ LABELS = {  # the sets in the order the tables list them (a set not named here c
     "houses-paper": "unseen houses, paper context", "houses-plus": "unseen houses, plus context",
     "houses-long": "unseen houses, longer routes, plus context",
     "houses-fast": "unseen houses, longer routes, plus context, fast profile",
+    "houses-objects": "unseen houses, objects of every kind, plus context",
 }
 
 
