@@ -8,7 +8,11 @@ finish; exterior stretches are thickened outwards by T_EXT, as in the cabin.
 from __future__ import annotations
 
 import random
+from collections.abc import Callable
+from dataclasses import replace
+from typing import Any
 
+from vlnpilot.scene.cabin import MATERIALS as CABIN_MATERIALS
 from vlnpilot.scene.furnish import WALL_IN
 from vlnpilot.scene.layout import Plan, PlanDoor, PlanRoom
 from vlnpilot.scene.model import EXTERIOR, Door, Light, Material, Solid
@@ -142,50 +146,33 @@ def room_materials(rng: random.Random, r: PlanRoom) -> list[Material]:
     return [floor, walls]
 
 
+# The houses' furniture wears the cabin's materials (cabin.MATERIALS is the one table), in this order; the
+# cushions go by their role here. A few take a seed-varied colour, drawn in the order they appear.
+_FURNITURE = ("ceiling", "door_frame", "door_leaf", "front_door", "metal", "chrome", "stainless", "black", "dark_grey",
+              "tv_screen", "wood", "dark_wood", "painted_wood", "cabinet", "countertop", "kitchen_tiles", "sofa",
+              "cushion_red", "cushion_yellow", "rug", "books", "lampshade", "window_view", "window_frame", "fridge",
+              "mattress", "blanket", "pillow", "mirror_glass", "mirror_frame", "painting", "ceramic", "water",
+              "marble", "curtain", "plant", "pot")
+_ROLE_NAMES = {"cushion_red": "cushion", "cushion_yellow": "cushion_alt"}
+
+
 def furniture_materials(rng: random.Random) -> list[Material]:
-    """Shared materials of the furniture, with seed-varied colours (fabric, wood, cabinets, blanket)."""
+    """Shared materials of the furniture: the cabin's, with seed-varied colours (fabric, wood, cabinets, ...)."""
     fabric = (round(rng.uniform(0.3, 1.0), 3), round(rng.uniform(0.3, 1.0), 3), round(rng.uniform(0.3, 1.0), 3), 1.0)
     cab = (round(rng.uniform(0.4, 0.95), 3), round(rng.uniform(0.5, 0.95), 3), round(rng.uniform(0.5, 0.95), 3), 1.0)
-    return [
-        Material("ceiling", texture="painted_wood", texrepeat=(0.5, 0.5), texuniform=True),
-        Material("door_frame", rgba=(0.93, 0.92, 0.88, 1.0), specular=0.3),
-        Material("door_leaf", rgba=_tint(rng, 0.7), texture="furniture_wood", texrepeat=(1.0, 1.0)),
-        Material("front_door", rgba=(0.45, 0.22, 0.12, 1.0), specular=0.3),
-        Material("metal", rgba=(0.75, 0.75, 0.78, 1.0), specular=0.8, shininess=0.8),
-        Material("chrome", rgba=(0.85, 0.87, 0.9, 1.0), specular=1.0, shininess=0.9),
-        Material("stainless", rgba=(0.80, 0.82, 0.85, 1.0), specular=0.7, shininess=0.6),
-        Material("black", rgba=(0.06, 0.06, 0.07, 1.0), specular=0.6, shininess=0.7),
-        Material("dark_grey", rgba=(0.25, 0.25, 0.27, 1.0), specular=0.3),
-        Material("tv_screen", rgba=(0.10, 0.16, 0.30, 1.0), specular=0.9, shininess=0.9, emission=0.35),
-        Material("wood", rgba=_tint(rng, 0.7), texture="furniture_wood", texrepeat=(1.0, 1.0)),
-        Material("dark_wood", rgba=(0.30, 0.19, 0.11, 1.0), specular=0.2),
-        Material("painted_wood", rgba=_tint(rng, 0.8), texture="painted_wood", texrepeat=(1.0, 1.0)),
-        Material("cabinet", rgba=cab, specular=0.25),
-        Material("countertop", rgba=(0.20, 0.20, 0.22, 1.0), specular=0.6, shininess=0.6),
-        Material("kitchen_tiles", texture="kitchen_tiles", texrepeat=(2.0, 2.0), texuniform=True),
-        Material("sofa", rgba=fabric, texture="sofa_fabric", texrepeat=(2.0, 2.0)),
-        Material("cushion", rgba=(0.75, 0.25, 0.2, 1.0)),
-        Material("cushion_alt", rgba=(0.90, 0.75, 0.3, 1.0)),
-        Material("rug", rgba=_tint(rng, 0.6), texture="rug", texrepeat=(1.0, 1.0)),
-        Material("books", texture="books", texrepeat=(1.0, 1.0)),
-        Material("lampshade", rgba=(0.98, 0.92, 0.78, 1.0), emission=0.6),
-        Material("window_view", texture="window_view", texrepeat=(1.0, 1.0), emission=0.7),
-        Material("window_frame", rgba=(0.95, 0.95, 0.95, 1.0)),
-        Material("fridge", rgba=(0.86, 0.88, 0.90, 1.0), specular=0.8, shininess=0.7),
-        Material("mattress", rgba=(0.95, 0.95, 0.93, 1.0)),
-        Material("blanket", rgba=_tint(rng, 0.5), texture="blanket", texrepeat=(1.0, 1.0)),
-        Material("pillow", rgba=(0.97, 0.97, 1.0, 1.0)),
-        Material("mirror_glass", texture="mirror_glass", texrepeat=(1.0, 1.0), specular=1.0, shininess=1.0,
-                 emission=0.25),
-        Material("mirror_frame", rgba=(0.72, 0.55, 0.25, 1.0), specular=0.6, shininess=0.6),
-        Material("painting", texture="painting", texrepeat=(1.0, 1.0)),
-        Material("ceramic", rgba=(0.97, 0.97, 0.97, 1.0), specular=0.7, shininess=0.7),
-        Material("water", rgba=(0.70, 0.80, 0.88, 1.0), specular=0.9, shininess=0.9),
-        Material("marble", rgba=(0.92, 0.92, 0.90, 1.0), specular=0.6, shininess=0.5),
-        Material("curtain", rgba=_tint(rng, 0.6), specular=0.1),
-        Material("plant", rgba=(0.20, round(rng.uniform(0.4, 0.6), 3), 0.22, 1.0)),
-        Material("pot", rgba=(0.70, 0.35, 0.20, 1.0)),
-    ]
+    seeded: dict[str, Callable[[], dict[str, Any]]] = {
+        "door_leaf": lambda: {"rgba": _tint(rng, 0.7)}, "wood": lambda: {"rgba": _tint(rng, 0.7)},
+        "painted_wood": lambda: {"rgba": _tint(rng, 0.8)}, "cabinet": lambda: {"rgba": cab},
+        "sofa": lambda: {"rgba": fabric}, "rug": lambda: {"rgba": _tint(rng, 0.6)},
+        "blanket": lambda: {"rgba": _tint(rng, 0.5)}, "curtain": lambda: {"rgba": _tint(rng, 0.6), "specular": 0.1},
+        "plant": lambda: {"rgba": (0.20, round(rng.uniform(0.4, 0.6), 3), 0.22, 1.0)},
+    }
+    cabin_table = {m.name: m for m in CABIN_MATERIALS}
+    out = []
+    for name in _FURNITURE:  # in order: the seeded colours are drawn as they come
+        changes = seeded[name]() if name in seeded else {}
+        out.append(replace(cabin_table[name], name=_ROLE_NAMES.get(name, name), **changes))
+    return out
 
 
 def lights(rng: random.Random, plan: Plan) -> list[Light]:
