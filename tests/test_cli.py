@@ -11,27 +11,17 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
+from cli_support import PROVIDER_ENV, run_main
 from vlnpilot import cli
 from vlnpilot.record import load_run
 
-NO_KEYS = {"OPENAI_API_KEY": None, "GEMINI_API_KEY": None, "GOOGLE_API_KEY": None}
+NO_KEYS = dict.fromkeys(PROVIDER_ENV)  # for the runs in a CliRunner or a subprocess
 FAKE_KEY = "not-a-real-key-0000"  # never a real key
 
 
 @pytest.fixture
 def runner() -> CliRunner:
     return CliRunner()
-
-
-def run_main(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    """Call `cli.main()` in-process as the `vln-pilot` entry point would: (exit code, stdout, stderr)."""
-    monkeypatch.setattr(sys, "argv", ["vln-pilot", *args])
-    for key in NO_KEYS:
-        monkeypatch.delenv(key, raising=False)
-    with pytest.raises(SystemExit) as info:
-        cli.main()
-    out, err = capsys.readouterr()
-    return int(info.value.code or 0), out, err
 
 
 # -- a real run ----------------------------------------------------------------------------------------------

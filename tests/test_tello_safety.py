@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cli_support import run_main
 from polling import wait_for
 from tello_support import LOCAL_PORT, STATE_PORT, emulator_config, free_udp_port, loopback_only, rig  # noqa: F401
-from vlnpilot import cli
 from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
@@ -130,13 +130,6 @@ def test_a_tello_that_does_not_answer_gives_a_clear_time_out() -> None:
     env.close()
 
 
-def run_main(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str]:
-    monkeypatch.setattr(sys, "argv", ["vln-pilot", *args])
-    with pytest.raises(SystemExit) as info:
-        cli.main()
-    return int(info.value.code or 0), capsys.readouterr().err
-
-
 @pytest.mark.parametrize(("args", "words"), [
     (["--shield", "geometry"], "--shield geometry needs ground truth"),
     (["--shield", "depth"], "--shield depth needs a front depth image"),
@@ -148,7 +141,7 @@ def run_main(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
 ])
 def test_bad_tello_options_are_one_line_and_exit_2(monkeypatch, capsys, args, words) -> None:
     base = ["run", "Go to the bedroom", "--robot", "tello", "--pilot", "stdin"]
-    code, err = run_main(monkeypatch, capsys, *base, *args)
+    code, _, err = run_main(monkeypatch, capsys, *base, *args)
     assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 

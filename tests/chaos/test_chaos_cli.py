@@ -7,6 +7,7 @@ from pathlib import Path
 
 import pytest
 
+from cli_support import PROVIDER_ENV, run_main
 from fakes import FakeOpenAI
 from vlnpilot import cli
 from vlnpilot.bench.results import wilson_interval
@@ -14,18 +15,6 @@ from vlnpilot.exits import BAD_INPUT, INTERRUPTED, PILOT_ERROR
 from vlnpilot.record import load_run
 
 pytestmark = pytest.mark.chaos
-KEYS = ("OPENAI_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY", "VLN_PILOT_URL")
-
-
-def vln(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], *args: str) -> tuple[int, str, str]:
-    """`vln-pilot ARGS` in-process through cli.main(): (exit code, stdout, stderr)."""
-    monkeypatch.setattr(sys, "argv", ["vln-pilot", *args])
-    for key in KEYS:
-        monkeypatch.delenv(key, raising=False)
-    with pytest.raises(SystemExit) as info:
-        cli.main()
-    out, err = capsys.readouterr()
-    return int(info.value.code or 0), out, err
 
 
 @pytest.mark.parametrize(("args", "names"), [
@@ -38,7 +27,7 @@ def vln(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str], *ar
     (["nosuchcommand"], "nosuchcommand"),
 ])
 def test_bad_input_is_one_line_naming_the_option_and_exit_2(monkeypatch, capsys, args, names) -> None:
-    code, out, err = vln(monkeypatch, capsys, *args)
+    code, out, err = run_main(monkeypatch, capsys, *args)
     assert code == BAD_INPUT
     assert len(err.strip().splitlines()) == 1, err
     assert err.startswith("error: ") and names in err
@@ -46,7 +35,7 @@ def test_bad_input_is_one_line_naming_the_option_and_exit_2(monkeypatch, capsys,
 
 
 def test_a_huge_query_is_not_echoed_whole(monkeypatch, capsys) -> None:
-    code, _, err = vln(monkeypatch, capsys, "run", "x" * 10_000)
+    code, _, err = run_main(monkeypatch, capsys, "run", "x" * 10_000)
     assert code == BAD_INPUT and len(err.strip().splitlines()) == 1
     assert len(err) < 600 and "10000 characters" in err
 
@@ -54,7 +43,7 @@ def test_a_huge_query_is_not_echoed_whole(monkeypatch, capsys) -> None:
 def test_a_malformed_suite_is_one_line_with_line_and_column(monkeypatch, capsys, tmp_path: Path) -> None:
     suite = tmp_path / "broken.yaml"
     suite.write_text("name: broken\nrows:\n  - id: a\n    query: [unclosed\n  - id: b\n")
-    code, _, err = vln(monkeypatch, capsys, "bench", "--suite", str(suite))
+    code, _, err = run_main(monkeypatch, capsys, "bench", "--suite", str(suite))
     assert code == BAD_INPUT and len(err.strip().splitlines()) == 1, err
     assert str(suite) in err and "line 5, column" in err
 
@@ -62,7 +51,8 @@ def test_a_malformed_suite_is_one_line_with_line_and_column(monkeypatch, capsys,
 def test_remote_without_url_says_which_server_it_asks(monkeypatch, capsys, tmp_path: Path) -> None:
     not_a_dir = tmp_path / "file"
     not_a_dir.write_text("")  # the run stops at --out, after the pilot line and before any request
-    code, _, err = vln(monkeypatch, capsys, "run", "Go to the bedroom", "--pilot", "remote", "--out", str(not_a_dir))
+    code, _, err = run_main(monkeypatch, capsys, "run", "Go to the bedroom", "--pilot", "remote", "--out",
+                            str(not_a_dir))
     assert code == BAD_INPUT
     assert err.splitlines()[0] == "pilot server: http://127.0.0.1:8000 (VLN_PILOT_URL is not set)"
 
@@ -81,7 +71,7 @@ def test_a_rejected_key_exits_with_the_pilot_error_code(monkeypatch, capsys, tmp
 
 
 def test_a_flown_episode_exits_0_whatever_its_outcome(monkeypatch, capsys, tmp_path: Path) -> None:
-    code, out, _ = vln(monkeypatch, capsys, "run", "Go to the bathroom", "--spawn", "bedroom", "--pilot",
+    code, out, _ = run_main(monkeypatch, capsys, "run", "Go to the bathroom", "--spawn", "bedroom", "--pilot",
                        "oracle", "--max-steps", "1", "-q", "--no-video", "--out", str(tmp_path / "r"))
     assert code == 0 and "max_steps" in out
 
@@ -89,12 +79,12 @@ def test_a_flown_episode_exits_0_whatever_its_outcome(monkeypatch, capsys, tmp_p
 def test_a_run_directory_that_holds_a_run_is_refused_unless_overwrite(monkeypatch, capsys, tmp_path: Path) -> None:
     args = ["run", "Go to the bedroom", "--spawn", "bedroom", "--pilot", "oracle", "-q", "--no-video"]
     out_dir = tmp_path / "r"
-    assert vln(monkeypatch, capsys, *args, "--max-steps", "3", "--out", str(out_dir))[0] == 0
+    assert run_main(monkeypatch, capsys, *args, "--max-steps", "3", "--out", str(out_dir))[0] == 0
     first = (out_dir / "episode.jsonl").read_text()
-    code, _, err = vln(monkeypatch, capsys, *args, "--max-steps", "2", "--out", str(out_dir))
+    code, _, err = run_main(monkeypatch, capsys, *args, "--max-steps", "2", "--out", str(out_dir))
     assert code == BAD_INPUT and "already holds a run" in err and "--overwrite" in err
     assert (out_dir / "episode.jsonl").read_text() == first  # untouched
-    code, _, _ = vln(monkeypatch, capsys, *args, "--max-steps", "1", "--seed", "7", "--out", str(out_dir),
+    code, _, _ = run_main(monkeypatch, capsys, *args, "--max-steps", "1", "--seed", "7", "--out", str(out_dir),
                      "--overwrite")
     summary, steps = load_run(out_dir)
     assert code == 0 and summary["config"]["seed"] == 7 and len(steps) == summary["result"]["steps"]
@@ -106,7 +96,7 @@ def test_sigterm_ends_a_run_as_interrupted_with_code_130(tmp_path: Path) -> None
     import subprocess
 
     out_dir = tmp_path / "r"
-    env = {k: v for k, v in os.environ.items() if k not in KEYS}
+    env = {k: v for k, v in os.environ.items() if k not in PROVIDER_ENV}
     proc = subprocess.Popen([sys.executable, "-m", "vlnpilot.cli", "run", "Go to the bedroom", "--pilot", "stdin",
                              "--no-video", "-q", "--out", str(out_dir)], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env, text=True)
@@ -139,7 +129,7 @@ def test_the_stdin_pilot_leaves_no_temporary_directory(tmp_path: Path) -> None:
     import os
     import subprocess
 
-    env = {**{k: v for k, v in os.environ.items() if k not in KEYS}, "TMPDIR": str(tmp_path)}
+    env = {**{k: v for k, v in os.environ.items() if k not in PROVIDER_ENV}, "TMPDIR": str(tmp_path)}
     done = subprocess.run([sys.executable, "-m", "vlnpilot.cli", "run", "Go to the bedroom", "--pilot", "stdin",
                            "--no-video", "-q", "--out", str(tmp_path / "r")], stdin=subprocess.DEVNULL,
                           capture_output=True, text=True, env=env, timeout=120)
