@@ -14,7 +14,8 @@ from typing import Any
 
 import pytest
 
-from vlnpilot.robots.clock import Clock
+from vlnpilot.decision import Decision, PilotInput
+from vlnpilot.robots.clock import Clock, ManualClock
 from vlnpilot.robots.emulator import EmulatorConfig, TelloEmulator
 from vlnpilot.robots.operator import ConsoleOperator
 from vlnpilot.robots.tello import TelloEnv
@@ -96,3 +97,17 @@ def rig(*, spawn: str = "living_room", clock: Clock | None = None, emulator: dic
             yield emu, env
         finally:
             env.close()
+
+
+class ThinkingPilot:
+    """Thinks `seconds` on the test clock before each answer, then rotates right 15° in Recognize Room (a slow model
+    whose answers are always safe to fly: the tests measure time and the robot's limits, not the route)."""
+
+    name, model, privileged = "thinking", "thinking-1", False
+
+    def __init__(self, clock: ManualClock, seconds: float):
+        self.clock, self.seconds = clock, seconds
+
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        self.clock.sleep(self.seconds)
+        return Decision(room="living_room", movement="B1", state="Recognize Room", description="thinking")

@@ -9,10 +9,15 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from tello_support import emulator_config, loopback_only, rig, tello_config  # noqa: F401  (autouse guard)
+from tello_support import (  # noqa: F401  (loopback_only: the autouse guard)
+    ThinkingPilot,
+    emulator_config,
+    loopback_only,
+    rig,
+    tello_config,
+)
 from vlnpilot import cli
 from vlnpilot.commands import get_command
-from vlnpilot.decision import Decision, PilotInput
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
 from vlnpilot.pilots.base import make_pilot
@@ -84,24 +89,11 @@ def test_a_replayed_sim_trial_ends_where_the_simulator_ends(sim_trial: Path, tmp
     assert events == ["takeoff", "land"]
 
 
-class SlowPilot:
-    """Thinks for `seconds` (on the test clock) before each answer: rotate right 15°, in Recognize Room."""
-
-    name, model, privileged = "slow", "slow-1", False
-
-    def __init__(self, clock: ManualClock, seconds: float):
-        self.clock, self.seconds = clock, seconds
-
-    def decide(self, pilot_input: PilotInput) -> Decision:
-        self.clock.sleep(self.seconds)
-        return Decision(room="living_room", movement="B1", state="Recognize Room", description="thinking")
-
-
 def test_keepalive_while_a_pilot_takes_12_s_per_answer(tmp_path: Path) -> None:
     clock = ManualClock()
     with rig(clock=clock) as (emu, env):
         task = parse_query("Go to the bedroom", env.scene)
-        result = run_episode(env, SlowPilot(clock, 12.0), task, EpisodeConfig(max_steps=3, shield="assist"),
+        result = run_episode(env, ThinkingPilot(clock, 12.0), task, EpisodeConfig(max_steps=3, shield="assist"),
                              spawn="living_room")
         takeoff_t = next(t for t, c in emu.log.received if c == "takeoff")
         gaps = emu.log.gaps(since=takeoff_t)

@@ -14,8 +14,15 @@ import pytest
 
 from cli_support import run_main
 from polling import wait_for
-from tello_support import LOCAL_PORT, STATE_PORT, emulator_config, free_udp_port, loopback_only, rig  # noqa: F401
-from vlnpilot.decision import Decision, PilotInput
+from tello_support import (  # noqa: F401  (loopback_only: the autouse guard)
+    LOCAL_PORT,
+    STATE_PORT,
+    ThinkingPilot,
+    emulator_config,
+    free_udp_port,
+    loopback_only,
+    rig,
+)
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import RobotHalt
 from vlnpilot.record import Recorder, load_run
@@ -61,19 +68,6 @@ def test_crossing_the_geofence_lands_the_drone() -> None:
         assert [e["event"] for e in env.events][-2:] == ["geofence", "land"]
 
 
-class RotatingPilot:
-    """Thinks `seconds` on the test clock, then rotates right 15° in Recognize Room."""
-
-    name, model, privileged = "rotating", "rotating-1", False
-
-    def __init__(self, clock: ManualClock, seconds: float):
-        self.clock, self.seconds = clock, seconds
-
-    def decide(self, pilot_input: PilotInput) -> Decision:
-        self.clock.sleep(self.seconds)
-        return Decision(room="living_room", movement="B1", state="Recognize Room", description="turning")
-
-
 @pytest.mark.parametrize(("emulator", "backend", "event", "words"), [
     ({"battery_pct": 16.0}, {"takeoff_battery_pct": 10}, "battery_low", "below the landing floor of 15 %"),
     ({}, {"max_flight_s": 20.0}, "flight_time", "passed the limit of 20 s"),
@@ -83,7 +77,7 @@ def test_low_battery_and_flight_time_land_and_end_the_episode(tmp_path: Path, em
     clock = ManualClock()
     with rig(clock=clock, emulator=emulator, backend=backend) as (emu, env):
         task = parse_query("Go to the bedroom", env.scene)
-        result = run_episode(env, RotatingPilot(clock, 12.0), task, EpisodeConfig(max_steps=10, shield="assist"),
+        result = run_episode(env, ThinkingPilot(clock, 12.0), task, EpisodeConfig(max_steps=10, shield="assist"),
                              spawn="living_room", recorder=Recorder(tmp_path, save_frames=False))
         assert result.outcome == "halted" and words in result.reason
         assert emu.landed.is_set() and not emu.flying
