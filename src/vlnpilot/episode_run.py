@@ -13,7 +13,7 @@ from pathlib import Path
 from vlnpilot.environment import Environment
 from vlnpilot.episode import EpisodeConfig, EpisodeResult, JudgeOutcome, LoopControl, run_episode
 from vlnpilot.episode_record import StepCallback
-from vlnpilot.pilots.base import Pilot
+from vlnpilot.pilots.base import Pilot, close_pilot
 from vlnpilot.record import Recorder
 from vlnpilot.tasks import Task
 
@@ -33,12 +33,5 @@ def run_recorded_episode(env: Environment, pilot: Pilot, task: Task, config: Epi
         raise
     finally:
         recorder.close("failed")  # a no-op after a finished or interrupted episode
-        close_pilot(pilot)
-
-
-def close_pilot(pilot: object) -> None:
-    """Release a pilot's connections (model SDK clients, the files pilot's directory); errors do not matter here."""
-    close = getattr(pilot, "close", None)
-    if callable(close):
-        with contextlib.suppress(Exception):
-            close()
+        with contextlib.suppress(Exception):  # the episode is recorded; a failing close must not hide it
+            close_pilot(pilot)

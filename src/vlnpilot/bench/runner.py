@@ -136,7 +136,7 @@ def _command_line_options(specs: Sequence[str], pairs: Mapping[str, str]) -> dic
 def resolve_pilots(specs: Sequence[str], base_url: str | None,
                    pilot_options: Mapping[str, str] | None = None) -> list[PilotEntry]:
     """Build each pilot once in the parent: unknown names, bad models or missing keys fail before anything runs."""
-    from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.pilots.base import close_pilot, make_pilot
 
     given = _command_line_options(specs, pilot_options) if pilot_options else {}
     out, dirs = [], set()
@@ -145,10 +145,8 @@ def resolve_pilots(specs: Sequence[str], base_url: str | None,
         if base_url and _accepts(spec, "base_url"):
             options["base_url"] = base_url
         pilot = make_pilot(spec, **options)
-        close = getattr(pilot, "close", None)
-        if callable(close):
-            with contextlib.suppress(Exception):
-                close()
+        with contextlib.suppress(Exception):  # built only to check it; the workers build their own
+            close_pilot(pilot)
         d = _pilot_dir(spec)
         if d in dirs:
             d += "-" + hashlib.sha256(spec.encode()).hexdigest()[:6]

@@ -122,3 +122,10 @@ def make_pilot(spec: str, **options: Any) -> Pilot:
     if model is not None:
         options["model"] = model
     return entry.factory(**entry.options.build(name, **options).given())
+
+
+def close_pilot(pilot: object) -> None:
+    """Release what a pilot holds (an SDK client's sockets, a server connection), if it has a `close()`."""
+    close = getattr(pilot, "close", None)
+    if callable(close):
+        close()

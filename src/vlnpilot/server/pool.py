@@ -13,7 +13,7 @@ from collections.abc import Callable, Iterable
 from typing import Any
 
 from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.pilots.base import Pilot, parse_spec, pilot_factory, pilot_options_class
+from vlnpilot.pilots.base import Pilot, close_pilot, parse_spec, pilot_factory, pilot_options_class
 
 DEFAULT_MAX_CACHED = 8
 
@@ -39,13 +39,6 @@ def refuse_privileged(specs: Iterable[str]) -> None:
         if getattr(factory, "privileged", False):
             raise ConfigError(f"pilot {spec!r} needs the simulator's ground truth, which a server does not have; "
                               "serve a model pilot, e.g. --pilot openai:gpt-4.1")
-
-
-def close_pilot(pilot: Any) -> None:
-    """Release a pilot's SDK client (sockets, pools), if it has a close()."""
-    close = getattr(pilot, "close", None)
-    if callable(close):
-        close()
 
 
 class PilotPool:
