@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from vlnpilot.prompting import render_state_prompt, system_prompt
+from vlnpilot.scene.model import target_kind
 from vlnpilot.sim import Simulator
 from vlnpilot.sim.target_views import facing_view, free_standpoint, view, width_fraction
 from vlnpilot.success import OBJECT_CLOSE_CUES, OBJECT_CLOSE_WIDTH_FRACTION, SuccessConfig, close_cue, visual_cue_values
@@ -87,7 +88,7 @@ def seen() -> list[Seen]:
 
 
 def _kinds(seen: list[Seen]) -> set[str]:
-    return {s.target_id.split("_")[0] for s in seen}
+    return {target_kind(s.target_id) for s in seen}
 
 
 def test_every_kind_is_rendered() -> None:
@@ -121,7 +122,7 @@ def test_no_cue_holds_beyond_the_success_distance(seen: list[Seen], factor: floa
 def test_one_width_for_every_kind_would_disagree_with_the_monitor(seen: list[Seen]) -> None:
     """Why the cue names the kinds: with the cabin's 65 % for everything, a desk or a TV looks close from 1.1 m
     and a toilet never does within 1 m."""
-    at = {(s.target_id.split("_")[0], s.distance): s.width for s in seen}
+    at = {(target_kind(s.target_id), s.distance): s.width for s in seen}
     assert at[("desk", 1.1)] >= OBJECT_CLOSE_WIDTH_FRACTION and at[("tv", 1.1)] >= OBJECT_CLOSE_WIDTH_FRACTION
     assert at[("toilet", 0.7)] < OBJECT_CLOSE_WIDTH_FRACTION
 

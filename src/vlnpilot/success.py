@@ -9,6 +9,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from vlnpilot.commands import COMMANDS
+from vlnpilot.scene.model import target_kind
+
 
 @dataclass(frozen=True)
 class SuccessConfig:
@@ -43,12 +46,13 @@ class CloseCue:
     then_m: float = 0.0
 
 
+FRIDGE_SIZED = CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (with the "
+                        "cabinet under it), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION)
 OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
     CloseCue(("toilet",), "a toilet", 0.25),
     CloseCue(("plant",), "a potted plant", 0.35),
     CloseCue(("stove",), "a stove (the cooktop and oven, not the counter beside them)", 0.50),
-    CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (with the cabinet under "
-             "it), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION),
+    FRIDGE_SIZED,
     CloseCue(("shower",), "a shower", 0.80),
     CloseCue(("bookshelf",), "a bookshelf", 0.85),
     CloseCue(("tv",), "a TV (with the cabinet it stands on)", FILLS_THE_WIDTH),
@@ -57,16 +61,19 @@ OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
 )
 
 
-def close_cue(kind: str) -> CloseCue:
-    """The cue for a kind of object (`desk`; a numbered target id such as `desk_2` works too)."""
-    kind = kind.split("_")[0]
-    return next((c for c in OBJECT_CLOSE_CUES if kind in c.kinds), OBJECT_CLOSE_CUES[3])
+def close_cue(target_id: str) -> CloseCue:
+    """The cue for a target (`desk_2`) or a kind of object (`desk`); a kind not listed is taken as fridge-sized."""
+    kind = target_kind(target_id)
+    return next((c for c in OBJECT_CLOSE_CUES if kind in c.kinds), FRIDGE_SIZED)
+
+
+_A1_M = COMMANDS["A1"].amount  # the shortest forward move, in metres
 
 
 def _cue_text(cue: CloseCue) -> str:
     if cue.width_fraction < FILLS_THE_WIDTH:
         return f"{cue.shown_as}: {cue.width_fraction:.0%} of the image width".replace("%", " %")
-    then = (f", then about {cue.then_m:g} m further straight ahead (about {round(cue.then_m / 0.1)} `A1`, or until "
+    then = (f", then about {cue.then_m:g} m further straight ahead (about {round(cue.then_m / _A1_M)} `A1`, or until "
             "the safety system stops the drone): center its middle and face it squarely before its ends leave the "
             "image, because they tell where its middle is") if cue.then_m else ""
     return f"{cue.shown_as}: the whole width (both its ends outside the image){then}"
@@ -74,6 +81,5 @@ def _cue_text(cue: CloseCue) -> str:
 
 def visual_cue_values(config: SuccessConfig = DEFAULT_SUCCESS) -> dict[str, str]:
     """The calibrated numbers that the prompts state, as template values (one source for prompt and test)."""
-    return {"close_width_pct": f"{OBJECT_CLOSE_WIDTH_FRACTION:.0%}".replace("%", " %"),
-            "close_cues": "\n".join(f"  - {_cue_text(c)}" for c in OBJECT_CLOSE_CUES),
+    return {"close_cues": "\n".join(f"  - {_cue_text(c)}" for c in OBJECT_CLOSE_CUES),
             "success_distance": f"{config.object_distance_m:g} m"}

@@ -58,6 +58,11 @@ class Room:
         return (self.id, self.name, *self.aliases)
 
 
+def target_kind(target_id: str) -> str:
+    """A target's kind from its id: 'desk_2' -> 'desk' (the houses number their targets; the cabin does not)."""
+    return target_id.split("_")[0]
+
+
 @dataclass(frozen=True)
 class Door:
     """A doorway in a wall. `normal_deg` points from rooms[0] into rooms[1]; the opening is `width` wide."""

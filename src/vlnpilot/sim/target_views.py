@@ -40,8 +40,3 @@ def width_fraction(seg: np.ndarray, ids) -> float:
     """The fraction of the image width between the leftmost and rightmost columns showing any of `ids`."""
     cols = np.flatnonzero(np.isin(seg, list(ids)).any(axis=0))
     return 0.0 if cols.size == 0 else (cols[-1] - cols[0] + 1) / seg.shape[1]
-
-
-def target_kind(target_id: str) -> str:
-    """A target's kind from its id: 'desk_2' -> 'desk' (the houses number their targets; the cabin does not)."""
-    return target_id.split("_")[0]
