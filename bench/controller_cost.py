@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from vlnpilot.decision import PilotInput, normalize_decision, parse_decision, validate_decision
-from vlnpilot.fsm import State
-from vlnpilot.prompting import build_prompt
-from vlnpilot.record import Recorder
+from vlnpilot.core.decision import PilotInput, normalize_decision, parse_decision, validate_decision
+from vlnpilot.core.fsm import State
+from vlnpilot.core.rundir import Recorder
+from vlnpilot.prompting.render import build_prompt
 from vlnpilot.scene import load_scene
 
 BUDGET_MS = 30.0

@@ -24,10 +24,11 @@ CHILD = """
 import sys
 sys.path.insert(0, sys.argv[1])
 from fakes import FakeOpenAI
-from vlnpilot.episode import EpisodeConfig, run_episode
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 fake = FakeOpenAI().start()
 fake.push("hang", times=20, seconds=600.0)

@@ -29,10 +29,11 @@ _SIMS: dict = {}
 
 def run_one(job: tuple[str, str, str, str, str, int, str, int]) -> dict:
     """One episode in a worker: (shield, row id, scene, spawn, query, seed, pilot, max steps) -> a result row."""
-    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.loop import run_episode
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.sim import SimConfig, Simulator
-    from vlnpilot.tasks import parse_query
+    from vlnpilot.tasks.task import parse_query
 
     shield, row, scene, spawn, query, seed, pilot_spec, max_steps = job
     if scene not in _SIMS:

@@ -20,13 +20,14 @@ from pathlib import Path
 
 from machine import describe  # bench/machine.py, beside this script
 
-from vlnpilot.episode import EpisodeConfig, run_episode
+from vlnpilot.core.rundir import Recorder
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.live.control import LiveControl
 from vlnpilot.live.station import LiveStation
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.record import Recorder
 from vlnpilot.sim import Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--no-first-run"]

@@ -22,7 +22,7 @@ from machine import describe, publish  # bench/machine.py, beside this script
 from vlnpilot.scene.model import target_kind
 from vlnpilot.sim import Simulator
 from vlnpilot.sim.target_views import facing_view, free_standpoint, width_fraction
-from vlnpilot.success import OBJECT_CLOSE_WIDTH_FRACTION, SuccessConfig, close_cue
+from vlnpilot.tasks.success import OBJECT_CLOSE_WIDTH_FRACTION, SuccessConfig, close_cue
 
 FACTORS = (0.7, 1.0, 1.1, 1.5)
 Widths = dict[str, dict[float, list[float]]]

@@ -32,7 +32,7 @@ class Spinner:
     model = "spinner"
 
     def decide(self, pilot_input):  # noqa: ANN001, ANN201 - the Pilot protocol
-        from vlnpilot.decision import Decision, Usage
+        from vlnpilot.core.decision import Decision, Usage
 
         return Decision(room="living_room", movement="C1", state="Recognize Room",
                         description=f"Turning to look around the room (step {pilot_input.step}).",
@@ -41,10 +41,11 @@ class Spinner:
 
 
 def fly(run_dir: Path, steps: int) -> None:
-    from vlnpilot.episode import EpisodeConfig, run_episode
-    from vlnpilot.record import Recorder
+    from vlnpilot.core.rundir import Recorder
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.loop import run_episode
     from vlnpilot.sim import Simulator
-    from vlnpilot.tasks import parse_query
+    from vlnpilot.tasks.task import parse_query
 
     with Simulator("cabin") as sim:
         task = parse_query("Go to the bathroom", sim.scene)

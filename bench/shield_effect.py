@@ -41,9 +41,10 @@ def _init_worker() -> None:
 
 def run_one(job: tuple[str, int, int, int, str]) -> dict:
     """One episode in a worker: (shield, row index, rep, seed, pilot spec) -> a flat result row."""
-    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.loop import run_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.tasks import parse_query
+    from vlnpilot.tasks.task import parse_query
 
     shield, row, rep, seed, pilot_spec = job
     spawn, query = PAPER_SUITE[row]

@@ -17,7 +17,7 @@ import time
 
 from machine import cpu_model  # bench/machine.py, beside this script
 
-from vlnpilot.commands import get_command
+from vlnpilot.core.commands import get_command
 from vlnpilot.sim import SimConfig, Simulator, drone  # selects the headless GL backend before mujoco loads
 
 # A mix of forward moves, turns, lateral moves and a hover; some runs end against walls or furniture,

@@ -20,7 +20,7 @@ import time
 
 from machine import describe  # bench/machine.py, beside this script
 
-from vlnpilot.commands import get_command
+from vlnpilot.core.commands import get_command
 from vlnpilot.robots.emulator import EmulatorConfig, TelloEmulator
 from vlnpilot.robots.tello import TelloEnv
 from vlnpilot.robots.tello_config import load_tello_config

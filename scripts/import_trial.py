@@ -18,7 +18,7 @@ from pathlib import Path
 
 import yaml
 
-from vlnpilot.record import load_run
+from vlnpilot.core.rundir import load_run
 from vlnpilot.scene import load_scene
 
 

@@ -9,9 +9,9 @@ from pathlib import Path
 
 from PIL import Image
 
+from vlnpilot.core.records import Pose
 from vlnpilot.report.floorplan import save_floorplan
 from vlnpilot.sim import Simulator
-from vlnpilot.types import Pose
 
 
 def main() -> None:

@@ -12,15 +12,17 @@ import time
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
+from vlnpilot.core.rundir import Recorder
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
+from vlnpilot.episode.measures import EpisodeResult
 from vlnpilot.live.control import LiveControl, Refused
 from vlnpilot.live.station import LiveStation
 from vlnpilot.pilots.base import PilotError
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.record import Recorder
 from vlnpilot.scene import load_scene
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 GATE_TIMEOUT_S = 60.0  # a test that forgets to release its pilot fails instead of hanging
 

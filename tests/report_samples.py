@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from vlnpilot.episode import EpisodeResult
+from vlnpilot.episode.measures import EpisodeResult
 
 EVIL = '<script>window.__pwned=1</script><img src=x onerror="window.__pwned=2">&amp; "quoted" </pre>'
 

@@ -14,7 +14,7 @@ from typing import Any
 
 import pytest
 
-from vlnpilot.decision import Decision, PilotInput
+from vlnpilot.core.decision import Decision, PilotInput
 from vlnpilot.robots.clock import Clock, ManualClock
 from vlnpilot.robots.emulator import EmulatorConfig, TelloEmulator
 from vlnpilot.robots.operator import ConsoleOperator

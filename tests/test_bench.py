@@ -33,8 +33,8 @@ from vlnpilot.bench.executors import split_workers
 from vlnpilot.bench.manifest import MANIFEST
 from vlnpilot.bench.runner import config_hash
 from vlnpilot.bench.suite import suite_from_dict
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.tasks import spl
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.tasks.task import spl
 
 
 @pytest.fixture
@@ -212,7 +212,7 @@ def test_bad_options_are_refused_before_anything_runs(tiny: Path, tmp_path: Path
     out = tmp_path / "b"
     with pytest.raises(ConfigError, match="unknown shield 'laser'; valid shields: off, geometry, depth"):
         run_bench(inline(tiny, out, episode_options={"shield": "laser"}))
-    with pytest.raises(ConfigError, match="unknown executor 'slurm'; valid executors: local, ray, inline"):
+    with pytest.raises(ConfigError, match="unknown executor 'slurm'; valid executors: inline, local, ray"):
         run_bench(BenchSettings(suite=tiny, out=out, executor="slurm"))
     with pytest.raises(UnknownNameError, match="unknown pilot 'gpt'"):
         run_bench(inline(tiny, out, pilots=("gpt",)))
@@ -226,7 +226,7 @@ def test_a_registered_executor_runs_the_bench(tiny: Path, tmp_path: Path) -> Non
     """An executor from outside the package: registered by name, it gets the options and every episode."""
     from vlnpilot.bench import register_executor
     from vlnpilot.bench.episode_job import Event, SimulatorCache, run_guarded
-    from vlnpilot.bench.executors import _EXECUTORS, ExecutorOptions
+    from vlnpilot.bench.executors import EXECUTOR_REGISTRY, ExecutorOptions
 
     seen: dict[str, object] = {}
 
@@ -252,7 +252,7 @@ def test_a_registered_executor_runs_the_bench(tiny: Path, tmp_path: Path) -> Non
         report = run_bench(BenchSettings(suite=tiny, out=tmp_path / "b", executor="backwards", workers=3,
                                          render=False, progress=False))
     finally:
-        del _EXECUTORS["backwards"]
+        EXECUTOR_REGISTRY.unregister("backwards")
     assert report.complete and report.executor == "backwards (test)" and seen["closed"] is True
     assert seen["options"] == ExecutorOptions(workers=3, ray_address=None, plugins=())
     reference = run_bench(inline(tiny, tmp_path / "i"))
@@ -265,7 +265,7 @@ def test_a_registered_executor_runs_the_bench(tiny: Path, tmp_path: Path) -> Non
 def test_the_executor_is_closed_when_the_bench_fails(tiny: Path, tmp_path: Path) -> None:
     from vlnpilot.bench import register_executor
     from vlnpilot.bench.episode_job import Event
-    from vlnpilot.bench.executors import _EXECUTORS
+    from vlnpilot.bench.executors import EXECUTOR_REGISTRY
 
     closed = []
 
@@ -288,6 +288,6 @@ def test_the_executor_is_closed_when_the_bench_fails(tiny: Path, tmp_path: Path)
         with pytest.raises(BenchError, match="no GPU today"):
             run_bench(BenchSettings(suite=tiny, out=tmp_path / "b", executor="failing", progress=False))
     finally:
-        del _EXECUTORS["failing"]
+        EXECUTOR_REGISTRY.unregister("failing")
     assert closed == [True]
     assert (tmp_path / "b" / "table.md").is_file()  # the tables are written whatever happened

@@ -16,12 +16,18 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from vlnpilot.prompting import render_state_prompt, system_prompt
+from vlnpilot.core.records import Pose
+from vlnpilot.prompting.render import render_state_prompt, system_prompt
 from vlnpilot.scene.model import target_kind
 from vlnpilot.sim import Simulator
 from vlnpilot.sim.target_views import facing_view, free_standpoint, view, width_fraction
-from vlnpilot.success import OBJECT_CLOSE_CUES, OBJECT_CLOSE_WIDTH_FRACTION, SuccessConfig, close_cue, visual_cue_values
-from vlnpilot.types import Pose
+from vlnpilot.tasks.success import (
+    OBJECT_CLOSE_CUES,
+    OBJECT_CLOSE_WIDTH_FRACTION,
+    SuccessConfig,
+    close_cue,
+    visual_cue_values,
+)
 
 SUCCESS_M = SuccessConfig().object_distance_m
 

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 from cli_support import PROVIDER_ENV, run_main
 from vlnpilot import cli
-from vlnpilot.record import load_run
+from vlnpilot.core.rundir import load_run
 
 NO_KEYS = dict.fromkeys(PROVIDER_ENV)  # for the runs in a CliRunner or a subprocess
 FAKE_KEY = "not-a-real-key-0000"  # never a real key
@@ -74,7 +74,7 @@ BAD_INPUT = [
     (["bench", "--pilots", "oracle", "--pilot-option", "detail=high"],
      ["--pilot-option 'detail' is taken by none of the pilots oracle", "valid keys: approach_m"]),
     (["bench", "--plugin", "no_such_module_here"], ["cannot import plugin module 'no_such_module_here'"]),
-    (["bench", "--executor", "slurm"], ["unknown executor 'slurm'; valid executors: local, ray, inline"]),
+    (["bench", "--executor", "slurm"], ["unknown executor 'slurm'; valid executors: inline, local, ray"]),
 ]
 
 
@@ -143,7 +143,7 @@ def test_bad_max_steps_is_a_usage_error(monkeypatch: pytest.MonkeyPatch, capsys:
 
 def test_interrupt_exits_130_and_keeps_the_steps(monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str],
                                                  tmp_path: Path) -> None:
-    import vlnpilot.episode_run as episode_run  # the one place `vln-pilot run` and the bench fly an episode
+    import vlnpilot.episode.run as episode_run  # the one place `vln-pilot run` and the bench fly an episode
 
     real = episode_run.run_episode
 

@@ -5,16 +5,17 @@ from __future__ import annotations
 
 import pytest
 
-from vlnpilot.commands import get_command
-from vlnpilot.context import CONTEXT_PRESETS, ContextConfig, PilotContext, context_name, context_preset
-from vlnpilot.decision import Decision
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import get_command
+from vlnpilot.core.decision import Decision
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.fsm import State
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
-from vlnpilot.prompting import build_prompt
-from vlnpilot.record import Recorder, load_run
-from vlnpilot.tasks import parse_query
+from vlnpilot.prompting.context import CONTEXT_PRESETS, ContextConfig, PilotContext, context_name, context_preset
+from vlnpilot.prompting.render import build_prompt
+from vlnpilot.tasks.task import parse_query
 
 S = State
 

@@ -12,9 +12,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from vlnpilot import tello_spec
-from vlnpilot.commands import COMMANDS, HOVER, Command, get_command
-from vlnpilot.environment import (
+from vlnpilot.core import tello_spec
+from vlnpilot.core.commands import COMMANDS, HOVER, Command, get_command
+from vlnpilot.core.environment import (
     UNDECLARED,
     Capabilities,
     DepthSensing,
@@ -25,14 +25,15 @@ from vlnpilot.environment import (
     depth_sensing_of,
     ground_truth_of,
 )
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import State
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import GroundTruth, Motion, Observation, Pose
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.safety import make_safety, make_shield
 from vlnpilot.scene import Scene
-from vlnpilot.tasks import parse_query
-from vlnpilot.types import GroundTruth, Motion, Observation, Pose
+from vlnpilot.tasks.task import parse_query
 
 WALL_X = 3.0  # the fakes' world: one flat wall across the flight slab at x = 3 m, seen head-on
 CAMERA_OFFSET = tello_spec.LENGTH / 2 + 0.002  # the front camera sits at the nose

@@ -10,19 +10,20 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from vlnpilot.commands import COMMANDS, get_command
-from vlnpilot.decision import Decision, DecisionError, PilotInput
-from vlnpilot.environment import Capabilities
-from vlnpilot.episode import OUTCOMES, EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.fsm import FINAL_STATES, State, parse_state, state_spec
+from vlnpilot.core.commands import COMMANDS, get_command
+from vlnpilot.core.decision import Decision, DecisionError, PilotInput
+from vlnpilot.core.environment import Capabilities
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.fsm import FINAL_STATES, State, parse_state, state_spec
+from vlnpilot.core.records import Pose
+from vlnpilot.episode.config import OUTCOMES, EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.scene.model import Spawn
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
-from vlnpilot.types import Pose
+from vlnpilot.tasks.task import parse_query
 
 NEAR_WALL = Spawn("near_wall", "living_room", Pose(3.6, 1.8, 1.0, 0.0), "0.3 m from the living room's east wall")
 
@@ -226,7 +227,7 @@ def test_invalid_answer_is_reasked_with_the_reason_then_executed_when_valid(geo:
 
 def test_a_decision_is_validated_once(geo: Simulator, monkeypatch: pytest.MonkeyPatch) -> None:
     """A pilot that validates its own decisions (ModelPilot) is not validated again; any other pilot is."""
-    import vlnpilot.episode_ask as episode_ask
+    import vlnpilot.episode.ask as episode_ask
 
     seen: list[str] = []
 

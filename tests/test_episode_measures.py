@@ -15,14 +15,16 @@ from typing import Any
 
 import pytest
 
-import vlnpilot.episode_measures as episode_measures
+import vlnpilot.episode.measures as episode_measures
 from bench_records import TINY
 from vlnpilot.bench import BenchSettings, run_bench
-from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
-from vlnpilot.episode_measures import (
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
+from vlnpilot.episode.measures import (
     EPISODE_FIELDS,
     LAST,
     EpisodeEnd,
+    EpisodeResult,
     EpisodeStart,
     Measures,
     ResultField,
@@ -34,7 +36,7 @@ from vlnpilot.episode_measures import (
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.safety import make_safety
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 # The recorded result as main wrote it before the measures declared their fields: its keys, in this order.
 RECORDED_KEYS = ["outcome", "reason", "steps", "path_length_m", "shortest_path_m", "spl", "collisions", "invalid_decisions", "oscillations", "final_state", "final_room", "contact", "input_tokens", "cached_tokens", "output_tokens", "cost_usd", "latency_s_total", "pilot_calls", "wall_time_s", "interventions", "oscillation_events", "shield", "judged_by"]

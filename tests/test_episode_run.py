@@ -7,12 +7,12 @@ from pathlib import Path
 
 import pytest
 
-from vlnpilot.episode import EpisodeConfig
-from vlnpilot.episode_run import run_recorded_episode
+from vlnpilot.core.rundir import load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.run import run_recorded_episode
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.record import load_run
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +68,7 @@ def test_an_episode_cut_short_keeps_its_steps_and_says_how_it_ended(sim: Simulat
 
 
 def test_a_used_run_directory_is_refused_unless_overwritten(sim: Simulator, tmp_path: Path) -> None:
-    from vlnpilot.errors import ConfigError
+    from vlnpilot.core.errors import ConfigError
 
     _fly(sim, ClosingOracle(), tmp_path / "run")
     with pytest.raises(ConfigError, match="--overwrite"):

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from vlnpilot.fileio import write_atomic
+from vlnpilot.core.fileio import write_atomic
 
 
 def test_write_atomic_publishes_through_a_hidden_temp_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
@@ -19,7 +19,7 @@ def test_write_atomic_publishes_through_a_hidden_temp_file(tmp_path: Path, monke
         assert not Path(dst).exists() or Path(dst).read_text(encoding="utf-8") == "old"  # never half-written
         real_replace(src, dst)
 
-    monkeypatch.setattr("vlnpilot.fileio.os.replace", spy)
+    monkeypatch.setattr("vlnpilot.core.fileio.os.replace", spy)
     (tmp_path / "a.json").write_text("old", encoding="utf-8")
     assert write_atomic(tmp_path / "a.json", "é\n") == tmp_path / "a.json"
     write_atomic(tmp_path / "b.bin", b"\x00\x01")

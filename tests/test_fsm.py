@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import pytest
 
-from vlnpilot.commands import COMMANDS
-from vlnpilot.errors import UnknownNameError
-from vlnpilot.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, fsm_table, parse_state, state_spec
+from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.errors import UnknownNameError
+from vlnpilot.core.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, fsm_table, parse_state, state_spec
 
 # The paper's Table 3 verbatim: state and goal, allowed moves, next states (ranges as the paper writes them).
 PAPER_TABLE_3 = [
@@ -165,7 +165,7 @@ def test_unknown_profile_lists_the_profiles() -> None:
 def test_asked_states_are_defined_once_and_read_by_prompts_server_and_plans() -> None:
     from typing import get_args
 
-    from vlnpilot.prompting import render_state_prompt
+    from vlnpilot.prompting.render import render_state_prompt
     from vlnpilot.report.floorplan import STATE_COLORS
     from vlnpilot.server.app import AskedState
 
@@ -180,7 +180,7 @@ def test_asked_states_are_defined_once_and_read_by_prompts_server_and_plans() ->
 def test_hover_goes_with_a_final_state_and_a_next_state_move_is_explained() -> None:
     """Real pilots answered E with Stay on Room from Recognize Room (now accepted), and A2 when leaving Go Through
     Door (still rejected, with the reason a pilot needs)."""
-    from vlnpilot.decision import Decision, validate_decision
+    from vlnpilot.core.decision import Decision, validate_decision
 
     def check(state: State, move: str, nxt: State) -> str | None:
         d = Decision(room="bedroom", movement=move, state=nxt.value, description="", door_position="not_visible")
@@ -197,7 +197,7 @@ def test_hover_goes_with_a_final_state_and_a_next_state_move_is_explained() -> N
 def test_the_readme_command_table_is_the_command_table() -> None:
     from pathlib import Path
 
-    from vlnpilot.commands import command_table_markdown
+    from vlnpilot.core.commands import command_table_markdown
 
     readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
     assert command_table_markdown() in readme

@@ -8,9 +8,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import vlnpilot.sim.gym_env as gym_env
-from vlnpilot.commands import COMMANDS
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.types import Pose
+from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.records import Pose
 
 W, H = 64, 48
 ACTION = {code: i for i, code in enumerate(COMMANDS)}

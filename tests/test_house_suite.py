@@ -14,7 +14,7 @@ from rich.console import Console
 from vlnpilot import cli
 from vlnpilot.bench import ResultsLog, bench_command
 from vlnpilot.bench.suite import load_suite, suite_from_dict
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.scene import load_scene
 
 

@@ -12,14 +12,14 @@ from dataclasses import replace
 import pytest
 
 from vlnpilot import cli
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.scene import load_scene
 from vlnpilot.scene.furnish import PROGRAMMES
 from vlnpilot.scene.houses import MAX_ATTEMPTS, ROOM_TYPES, generate_house, parse_house_name
 from vlnpilot.scene.mjcf import scene_to_mjcf
 from vlnpilot.scene.model import Solid
 from vlnpilot.scene.validate import HouseInvalid, validate, viewing_point
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 # The furniture that lets a person recognise each room type (solid-name fragments, all required).
 RECOGNISABLE = {"living_room": ("_tv_", "_sofa_"), "kitchen": ("_fridge_", "_counters_"),
@@ -163,9 +163,9 @@ def test_scene_render_writes_views_from_every_spawn_and_the_plan(tmp_path) -> No
 
 
 def test_every_target_is_seen_by_the_camera_from_its_viewing_point() -> None:
+    from vlnpilot.core.records import Pose
     from vlnpilot.sim import SimConfig, Simulator
     from vlnpilot.sim.ground_truth import SimGroundTruth
-    from vlnpilot.types import Pose
 
     for name in ("house:0", "house:5", "house:9?rooms=5"):
         with Simulator(name, SimConfig(width=64, height=48, rear_width=16, rear_height=16)) as sim:

@@ -38,7 +38,7 @@ def module_name(path: Path) -> str:
 
 
 def unit_of(module: str) -> str:
-    """'vlnpilot.scene.model' -> 'scene/'; 'vlnpilot.fsm' -> 'fsm'; the package itself -> '__init__'."""
+    """'vlnpilot.scene.model' -> 'scene/'; 'vlnpilot.cli' -> 'cli'; the package itself -> '__init__'."""
     parts = module.split(".")[1:]
     if not parts:
         return "__init__"
@@ -78,13 +78,13 @@ def imports(path: Path) -> set[str]:
             if node.level:  # relative: resolved against this module's package
                 package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
                 base = ".".join(package[: len(package) - node.level + 1] + ([node.module] if node.module else []))
-            # `from vlnpilot import pricing` imports the module vlnpilot.pricing, not the package
+            # `from vlnpilot.pilots import pricing` imports the module vlnpilot.pilots.pricing, not the package
             names = [f"{base}.{a.name}" if _is_module(f"{base}.{a.name}") else base for a in node.names]
         else:
             continue
         for name in names:
             if name == "vlnpilot" or name.startswith("vlnpilot."):
-                while not _is_module(name):  # vlnpilot.fsm.State -> vlnpilot.fsm
+                while not _is_module(name):  # vlnpilot.core.fsm.State -> vlnpilot.core.fsm
                     name = name.rpartition(".")[0]
                 found.add(name)
     return found
@@ -139,3 +139,69 @@ def test_the_walker_sees_function_imports_and_skips_type_checking(tmp_path: Path
     monkeypatch.setattr(sys.modules[__name__], "PACKAGE", fake)
     assert imports(fake / "sub" / "y.py") == {"vlnpilot.sub.x", "vlnpilot.fsm", "vlnpilot.errors"}
     assert unit_of("vlnpilot.sub.x") == "sub/" and unit_of("vlnpilot.fsm") == "fsm"
+
+
+TOP_LEVEL_MODULES = {"__init__", "__main__", "cli"}
+
+
+def test_the_top_level_holds_only_packages_and_the_entry_points() -> None:
+    loose = {p.stem for p in PACKAGE.glob("*.py")} - TOP_LEVEL_MODULES
+    assert not loose, f"move these modules into a package (docs/architecture.md names one per layer): {sorted(loose)}"
+
+
+def test_every_layer_below_the_command_line_is_one_package() -> None:
+    for units in layers():
+        if set(units) <= TOP_LEVEL_MODULES:
+            continue
+        assert len(units) == 1 and units[0].endswith("/"), f"one package per layer line, not {units}"
+
+
+def file_graph() -> dict[str, set[str]]:
+    """Module -> the vlnpilot modules it imports (TYPE_CHECKING imports skipped: they never run)."""
+    return {module_name(p): imports(p) - {module_name(p)} for p in all_modules()}
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected groups of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(node: str) -> None:
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        on_stack.add(node)
+        for nxt in graph.get(node, ()):
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in on_stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            group = []
+            while True:
+                top = stack.pop()
+                on_stack.discard(top)
+                group.append(top)
+                if top == node:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for node in sorted(graph):
+        if node not in index:
+            visit(node)
+    return found
+
+
+def test_no_import_circle_between_files() -> None:
+    circles = import_circles(file_graph())
+    assert not circles, "files that import each other (directly or around a circle):\n" + "\n".join(
+        " <-> ".join(c) for c in circles)
+
+
+def test_the_circle_finder_finds_a_circle() -> None:
+    assert import_circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert import_circles({"a": {"b"}, "b": set()}) == []

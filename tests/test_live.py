@@ -14,12 +14,12 @@ import pytest
 
 from live_episode import LiveEpisode
 from vlnpilot import cli
-from vlnpilot.episode import OUTCOMES
+from vlnpilot.core.rundir import load_run
+from vlnpilot.episode.config import OUTCOMES
 from vlnpilot.live import app as live_app
 from vlnpilot.live.control import LiveControl, Refused
 from vlnpilot.live.feed import RunFeed
 from vlnpilot.live.station import LiveStation
-from vlnpilot.record import load_run
 from vlnpilot.scene import load_scene
 
 

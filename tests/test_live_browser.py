@@ -15,8 +15,8 @@ from pathlib import Path
 
 from chromium import needs_chromium
 from live_episode import LiveEpisode
+from vlnpilot.core.rundir import load_run
 from vlnpilot.live.app import KEYS
-from vlnpilot.record import load_run
 
 ROOT = Path(__file__).resolve().parents[1]
 KEY_FOR = {code: key for key, code in reversed(KEYS.items())}  # the arrow or letter key of each command

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import pytest
 
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import known_pilots, make_pilot
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 
 def _fly(sim, query: str, spawn: str, seed: int, shield: str = "off", **options):

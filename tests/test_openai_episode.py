@@ -14,13 +14,14 @@ from typer.testing import CliRunner
 
 from fakes import FakeOpenAI
 from vlnpilot.cli import app
-from vlnpilot.decision import PilotInput
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.fsm import parse_state
+from vlnpilot.core.decision import PilotInput
+from vlnpilot.core.fsm import parse_state
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.record import Recorder, load_run
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 QUERY = "Go to the bedroom"
 

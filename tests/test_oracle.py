@@ -11,13 +11,15 @@ from typing import Any
 
 import pytest
 
-from vlnpilot.decision import PilotInput
-from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
-from vlnpilot.errors import VLNPilotError
-from vlnpilot.fsm import State, state_spec
+from vlnpilot.core.decision import PilotInput
+from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.fsm import State, state_spec
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
+from vlnpilot.episode.measures import EpisodeResult
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 MARGIN = 2
 # (spawn, query): steps measured on the paper profile (oracle defaults, cabin scene v2). Issue 12 asks for at most

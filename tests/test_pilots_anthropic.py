@@ -8,7 +8,7 @@ from fakes import FakeAnthropic, sample_input
 from vlnpilot.pilots._common import Reply
 from vlnpilot.pilots.anthropic import TOOL_NAME, AnthropicPilot, _reply
 from vlnpilot.pilots.base import PilotError, make_pilot
-from vlnpilot.pricing import cost_usd
+from vlnpilot.pilots.pricing import cost_usd
 
 KEY = "sk-ant-test-0123456789"
 

@@ -8,8 +8,8 @@ import time
 
 import pytest
 
-from vlnpilot.decision import DecisionError, parse_decision
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.decision import DecisionError, parse_decision
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots import _common
 from vlnpilot.pilots._common import (
     Secret,
@@ -20,7 +20,7 @@ from vlnpilot.pilots._common import (
     status_error,
 )
 from vlnpilot.pilots.base import PilotError, known_pilots
-from vlnpilot.pricing import DEFAULT_PRICES, PRICES_AS_OF, Price, cost_usd, find_price, load_prices
+from vlnpilot.pilots.pricing import DEFAULT_PRICES, PRICES_AS_OF, Price, cost_usd, find_price, load_prices
 
 
 def test_model_pilots_are_registered():

@@ -15,16 +15,17 @@ import pytest
 from PIL import Image
 
 from vlnpilot import cli
-from vlnpilot.decision import DecisionError, PilotInput
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import State
+from vlnpilot.core.decision import DecisionError, PilotInput
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import State
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.files import FilesPilot
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.prompting import build_prompt, system_prompt
+from vlnpilot.prompting.render import build_prompt, system_prompt
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 REPO = Path(__file__).resolve().parents[1]
 QUERY, SPAWN = "Find the sink in the bathroom", "bathroom"
@@ -215,7 +216,7 @@ def test_each_file_appears_whole_and_the_prompt_after_the_image(tmp_path: Path,
                                                                  monkeypatch: pytest.MonkeyPatch) -> None:
     published: list[tuple[str, str]] = []  # (temp name, final name) of every os.replace, in order
     real_replace = os.replace
-    monkeypatch.setattr("vlnpilot.fileio.os.replace",
+    monkeypatch.setattr("vlnpilot.core.fileio.os.replace",
                         lambda src, dst: (published.append((Path(src).name, Path(dst).name)), real_replace(src, dst)))
     fake = FakeTime({1.0: lambda: (tmp_path / "001.answer.json").write_text(json.dumps(ANSWER))})
     fake_pilot(tmp_path, fake).decide(pin())

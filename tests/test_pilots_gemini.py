@@ -73,7 +73,7 @@ def test_prompt_blocked_is_a_refusal(fake):
 
 
 def test_bad_thinking_option():
-    from vlnpilot.errors import ConfigError
+    from vlnpilot.core.errors import ConfigError
 
     with pytest.raises(ConfigError):
         GeminiPilot(api_key=KEY, thinking_budget="lots")

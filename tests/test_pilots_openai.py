@@ -7,7 +7,7 @@ import threading
 import pytest
 
 from fakes import FakeOpenAI, RecordedRequest, auto_decision, sample_input
-from vlnpilot.fsm import State
+from vlnpilot.core.fsm import State
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.openai import SCHEMA_NAME, OpenAIPilot
 
@@ -52,7 +52,7 @@ def test_official_api_uses_max_completion_tokens():
 
 
 def _prompt():
-    from vlnpilot.prompting import build_prompt
+    from vlnpilot.prompting.render import build_prompt
 
     return build_prompt(sample_input())
 
@@ -111,7 +111,7 @@ def test_quota_exhausted_is_fatal(fake):
 
 
 def test_bad_options_are_config_errors():
-    from vlnpilot.errors import ConfigError
+    from vlnpilot.core.errors import ConfigError
 
     with pytest.raises(ConfigError):
         OpenAIPilot(api_key=KEY, detail="ultra")

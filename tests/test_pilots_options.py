@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from vlnpilot.bench.runner import BenchSettings, config_hash, config_of, effective_suite, resolve_pilots
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots.base import known_pilots, make_pilot, pilot_factory, pilot_options_class, register_pilot
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions, parse_option_pairs
 from vlnpilot.server.pool import canonical_spec

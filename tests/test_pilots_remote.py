@@ -8,9 +8,9 @@ import httpx
 import pytest
 
 from fakes import ScriptedPilot, ServerThread, free_port, sample_input
-from vlnpilot.decision import Usage
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import State
+from vlnpilot.core.decision import Usage
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import State
 from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.remote import RemotePilot

@@ -12,18 +12,20 @@ from PIL import Image
 from typer.testing import CliRunner
 
 from vlnpilot import cli
-from vlnpilot.decision import Decision, DecisionError, PilotInput, parse_decision
-from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import State
+from vlnpilot.core.decision import Decision, DecisionError, PilotInput, parse_decision
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import State
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
+from vlnpilot.episode.measures import EpisodeResult
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
 from vlnpilot.pilots.replay import ReplayPilot
 from vlnpilot.pilots.stdin import StdinPilot
-from vlnpilot.prompting import system_prompt
-from vlnpilot.record import Recorder, load_run
+from vlnpilot.prompting.render import system_prompt
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 VOLATILE = {"frames"}  # fields that may differ between a run and its replay
 RESULT_VOLATILE = {"wall_time_s"}

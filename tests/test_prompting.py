@@ -12,8 +12,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from vlnpilot.commands import COMMANDS
-from vlnpilot.decision import (
+from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.decision import (
     DOOR_POSITIONS,
     FIELDS,
     Decision,
@@ -23,9 +23,9 @@ from vlnpilot.decision import (
     parse_decision,
     validate_decision,
 )
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import ASKED_STATES, PROFILES, State, fsm_table, state_spec
-from vlnpilot.prompting import (
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import ASKED_STATES, PROFILES, State, fsm_table, state_spec
+from vlnpilot.prompting.render import (
     Prompt,
     PromptTemplateError,
     build_prompt,
@@ -451,7 +451,7 @@ def test_parse_prefers_the_fenced_answer_over_an_echoed_example() -> None:
 
 
 def test_the_decision_fields_have_one_definition() -> None:
-    from vlnpilot.decision import DecisionFields
+    from vlnpilot.core.decision import DecisionFields
     from vlnpilot.server.app import DecideResponse
 
     assert FIELDS == tuple(DecisionFields.model_fields) == ("room", "movement", "state", "description",

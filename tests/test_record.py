@@ -8,15 +8,17 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
-from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.episode import EpisodeConfig, EpisodeResult, run_episode
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.records import GroundTruth
+from vlnpilot.core.rundir import EPISODE, FRAMES, SUMMARY, Recorder, check_writable, default_run_dir, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
+from vlnpilot.episode.measures import EpisodeResult
 from vlnpilot.pilots.oracle import OraclePilot
-from vlnpilot.prompting import prompt_hash
-from vlnpilot.record import EPISODE, FRAMES, SUMMARY, Recorder, check_writable, default_run_dir, load_run
+from vlnpilot.prompting.render import prompt_hash
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
-from vlnpilot.types import GroundTruth
+from vlnpilot.tasks.task import parse_query
 
 W, H = 160, 120
 # The documented fields of an episode.jsonl line; later layers (e.g. safety) may add more.

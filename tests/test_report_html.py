@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 
 from report_samples import EVIL, expected_table, make_bench, make_run
-from vlnpilot import episode_record
+from vlnpilot.episode import record as episode_record
 from vlnpilot.report.html import load_bench, write_bench_report, write_episode_report
 from vlnpilot.report.timeline import SHOWN_RAW, load_episode
 
@@ -139,10 +139,11 @@ def test_episode_video(run: Path) -> None:
 
 
 def test_report_of_a_real_flight(tmp_path: Path, sim) -> None:  # noqa: ANN001 - the shared simulator
-    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.core.rundir import Recorder
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.loop import run_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.record import Recorder
-    from vlnpilot.tasks import parse_query
+    from vlnpilot.tasks.task import parse_query
 
     task = parse_query("Go to the bathroom", sim.scene)
     run_episode(sim, make_pilot("oracle"), task, EpisodeConfig(max_steps=4), spawn="living_room",

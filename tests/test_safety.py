@@ -10,15 +10,17 @@ import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
-from vlnpilot import tello_spec
 from vlnpilot.bench.suite import load_suite
-from vlnpilot.commands import COMMANDS, HOVER, get_command
-from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.fsm import State
+from vlnpilot.core import tello_spec
+from vlnpilot.core.commands import COMMANDS, HOVER, get_command
+from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import Pose
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
-from vlnpilot.record import Recorder, load_run
 from vlnpilot.safety import (
     ASSIST_NOTE,
     GUARD_NOTE,
@@ -33,8 +35,7 @@ from vlnpilot.safety import (
     make_shield,
 )
 from vlnpilot.scene.model import Spawn
-from vlnpilot.tasks import parse_query
-from vlnpilot.types import Pose
+from vlnpilot.tasks.task import parse_query
 
 PAPER_ROWS = [(row.spawn, row.query) for row in load_suite("paper").rows]  # the paper's Table 4
 CODES = sorted(COMMANDS)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from vlnpilot.errors import UnknownNameError
+from vlnpilot.core.errors import UnknownNameError
 from vlnpilot.scene import SCENES, load_scene
 from vlnpilot.scene.model import EXTERIOR
 
@@ -96,8 +96,8 @@ def test_every_spawn_is_inside_its_room_and_collision_free(scene, geo_sim):
 def test_floorplan_draws_rooms_doors_targets_and_a_trajectory(scene, tmp_path):
     from matplotlib.colors import to_rgb
 
+    from vlnpilot.core.records import Pose
     from vlnpilot.report.floorplan import draw_floorplan, save_floorplan
-    from vlnpilot.types import Pose
 
     path = save_floorplan(scene, tmp_path / "plans" / "map.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

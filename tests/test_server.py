@@ -15,7 +15,7 @@ from schemathesis.specs.openapi.checks import positive_data_acceptance
 
 from fakes import FakeOpenAI, ScriptedPilot, sample_image
 from fakes.scripted import INSTANCES
-from vlnpilot.decision import Usage
+from vlnpilot.core.decision import Usage
 from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import PilotError
 from vlnpilot.server import create_app

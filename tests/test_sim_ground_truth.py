@@ -11,8 +11,8 @@ import math
 
 import pytest
 
+from vlnpilot.core.records import Pose
 from vlnpilot.sim import drone
-from vlnpilot.types import Pose
 
 NORTH_FACE_Y = 3.6  # wall_living_north_0: centre y 3.675, half thickness 0.075
 PARTITION_FACE_X = 3.95  # wall_living_bedroom_w_*: centre x 3.975, half thickness 0.025

@@ -8,10 +8,10 @@ import mujoco
 import numpy as np
 import pytest
 
-from vlnpilot.commands import COMMANDS
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.records import Motion, Pose
 from vlnpilot.sim import SimConfig, Simulator, drone
-from vlnpilot.types import Motion, Pose
 
 ONE_CM = Motion(forward_m=0.01)
 

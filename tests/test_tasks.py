@@ -6,10 +6,11 @@ import math
 
 import pytest
 
-from vlnpilot.commands import COMMANDS
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import GroundTruth, Motion, Pose
 from vlnpilot.scene import Scene
-from vlnpilot.tasks import (
+from vlnpilot.tasks.task import (
     Oscillations,
     PathLength,
     QueryError,
@@ -20,7 +21,6 @@ from vlnpilot.tasks import (
     shortest_path_length,
     spl,
 )
-from vlnpilot.types import GroundTruth, Motion, Pose
 
 # -- parse_query ---------------------------------------------------------------------------------------------
 PAPER_QUERIES = [  # Table 4 of the paper, and the goal each one names in the cabin
@@ -215,7 +215,7 @@ def test_path_length() -> None:
 
 
 def test_the_opposite_of_every_direction_is_its_mirror_in_the_command_table() -> None:
-    from vlnpilot.commands import COMMANDS, OPPOSITE
+    from vlnpilot.core.commands import COMMANDS, OPPOSITE
 
     for kind, opposite in OPPOSITE.items():
         assert OPPOSITE[opposite] is kind  # an involution

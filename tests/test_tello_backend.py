@@ -17,16 +17,17 @@ from tello_support import (  # noqa: F401  (loopback_only: the autouse guard)
     tello_config,
 )
 from vlnpilot import cli
-from vlnpilot.commands import get_command
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import RobotHalt
+from vlnpilot.core.commands import get_command
+from vlnpilot.core.errors import RobotHalt
+from vlnpilot.core.records import Pose, wrap_deg
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
-from vlnpilot.record import Recorder, load_run
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import TelloEmulator
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
-from vlnpilot.types import Pose, wrap_deg
+from vlnpilot.tasks.task import parse_query
 
 FAST_PULSES = {"calibration": {side: {"speed": 20, "duration_s": 0.5, "settle_s": 0.0}
                                for side in ("forward_10cm", "left_10cm", "right_10cm")} | {"move_settle_s": 0.0}}
@@ -135,8 +136,8 @@ def test_thirty_percent_of_replies_lost_never_repeats_a_move(tmp_path: Path) -> 
 
 def test_the_assist_shield_keeps_the_guard_acting_without_ground_truth(scene) -> None:
     """The Tello's default 'assist': the oscillation guard acts on the map and the pose, with no shield."""
-    from vlnpilot.commands import COMMANDS
-    from vlnpilot.fsm import State
+    from vlnpilot.core.commands import COMMANDS
+    from vlnpilot.core.fsm import State
     from vlnpilot.robots.tello import TelloEnv
     from vlnpilot.safety import make_safety
 

@@ -12,7 +12,7 @@ import pytest
 
 from polling import wait_for
 from tello_support import emulator_config, free_udp_port, loopback_only, rig  # noqa: F401  (loopback_only: autouse guard)
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import OUT_OF_RANGE, EmulatorConfig, TelloEmulator
 

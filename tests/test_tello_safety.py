@@ -23,16 +23,17 @@ from tello_support import (  # noqa: F401  (loopback_only: the autouse guard)
     loopback_only,
     rig,
 )
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import RobotHalt
-from vlnpilot.record import Recorder, load_run
+from vlnpilot.core.errors import RobotHalt
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.robots.clock import ManualClock
 from vlnpilot.robots.emulator import TelloEmulator
 from vlnpilot.robots.tello import TelloEnv
 from vlnpilot.robots.tello_config import load_tello_config
 from vlnpilot.robots.tello_link import RobotError
 from vlnpilot.sim import Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 
 def test_first_ctrl_c_lands_and_the_second_stops_the_motors(tmp_path: Path) -> None:

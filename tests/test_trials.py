@@ -10,12 +10,13 @@ from pathlib import Path
 import pytest
 
 from vlnpilot.bench.command import bench_command
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.rundir import load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
-from vlnpilot.record import load_run
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import Task
+from vlnpilot.tasks.task import Task
 
 TRIALS = Path(__file__).resolve().parents[1] / "trials"
 ALL = sorted(p.parent for p in TRIALS.glob("*/*/trial.json"))

@@ -14,7 +14,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
-from vlnpilot.errors import VLNPilotError
+from vlnpilot.core.errors import VLNPilotError
 
 app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
                   add_completion=False, pretty_exceptions_enable=False)
@@ -74,7 +74,7 @@ def scene_render(scene: SceneOpt = "cabin",
     Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
     from PIL import Image
 
-    from vlnpilot.record import check_writable
+    from vlnpilot.core.rundir import check_writable
     from vlnpilot.report.floorplan import save_floorplan
     from vlnpilot.sim import SimConfig, Simulator
 
@@ -125,17 +125,17 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 2 for bad input,
     130 when interrupted."""
-    from vlnpilot.environment import check_capabilities
-    from vlnpilot.episode import EpisodeConfig
-    from vlnpilot.episode_run import run_recorded_episode
-    from vlnpilot.exits import check_base_url, exit_code_for
+    from vlnpilot.core.environment import check_capabilities
+    from vlnpilot.core.exits import check_base_url, exit_code_for
+    from vlnpilot.core.rundir import claim_run_dir, default_run_dir
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.record import claim_run_dir, default_run_dir
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
     from vlnpilot.safety import default_shield
     from vlnpilot.scene import load_scene
-    from vlnpilot.tasks import parse_query
+    from vlnpilot.tasks.task import parse_query
 
     robot = check_robot(robot, tello_host)
     shield = shield or default_shield(robot_capabilities(robot).ground_truth)
@@ -259,7 +259,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
            video: Annotated[bool, typer.Option("--video/--no-video", help="Also write episode.mp4 and .gif.")] = True,
            ) -> None:
     """Write report.html (and the episode video) for a recorded run, or the report of a bench directory."""
-    from vlnpilot.errors import ConfigError
+    from vlnpilot.core.errors import ConfigError
 
     if not run_dir.is_dir():
         raise ConfigError(f"{run_dir} is not a directory; give a run directory (with summary.json) or a bench "
@@ -303,7 +303,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     Exit code 0 when every episode was flown to an outcome, 3 when any ended in pilot_error, 2 for bad input."""
     from vlnpilot.bench.command import bench_command
     from vlnpilot.bench.results import RESULTS, ResultsLog
-    from vlnpilot.exits import check_base_url, exit_code_for
+    from vlnpilot.core.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.options import parse_option_pairs
     from vlnpilot.safety import DEFAULT_SHIELD
 
@@ -368,7 +368,7 @@ def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
 def main() -> None:
     """Entry point: bad input becomes one clear line on stderr and exit code 2, never a traceback.
 
-    Exit codes (vlnpilot.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 130 interrupted.
+    Exit codes (vlnpilot.core.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 130 interrupted.
     """
     # click's exception module, wherever this Typer keeps it (Typer >= 0.20 vendors click as typer._click)
     click_errors = sys.modules[typer.BadParameter.__module__]

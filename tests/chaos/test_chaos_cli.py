@@ -11,8 +11,8 @@ from cli_support import PROVIDER_ENV, run_main
 from fakes import FakeOpenAI
 from vlnpilot import cli
 from vlnpilot.bench.results import wilson_interval
-from vlnpilot.exits import BAD_INPUT, INTERRUPTED, PILOT_ERROR
-from vlnpilot.record import load_run
+from vlnpilot.core.exits import BAD_INPUT, INTERRUPTED, PILOT_ERROR
+from vlnpilot.core.rundir import load_run
 
 pytestmark = pytest.mark.chaos
 

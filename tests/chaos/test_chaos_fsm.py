@@ -11,9 +11,9 @@ import pytest
 from rich.console import Console
 
 from vlnpilot.bench.command import bench_command
-from vlnpilot.commands import get_command
-from vlnpilot.fsm import state_spec
-from vlnpilot.overrides import OVERRIDE_REASONS, override_reason
+from vlnpilot.core.commands import get_command
+from vlnpilot.core.fsm import state_spec
+from vlnpilot.episode.overrides import OVERRIDE_REASONS, override_reason
 
 pytestmark = pytest.mark.chaos
 

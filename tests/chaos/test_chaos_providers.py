@@ -10,15 +10,16 @@ import threading
 import pytest
 
 from fakes import FakeAnthropic, FakeGemini, FakeOpenAI, ServerThread, sample_input
-from vlnpilot.episode import EpisodeConfig, run_episode
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.rundir import Recorder, load_run
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.gemini import GeminiPilot
 from vlnpilot.pilots.openai import OpenAIPilot
-from vlnpilot.prompting import build_prompt
-from vlnpilot.record import Recorder, load_run
+from vlnpilot.prompting.render import build_prompt
 from vlnpilot.server import create_app
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 pytestmark = pytest.mark.chaos
 KEY = "sk-not-a-real-key-0000"
@@ -162,10 +163,11 @@ HANGING_EPISODE = """
 import sys
 sys.path.insert(0, sys.argv[1])
 from fakes import FakeOpenAI
-from vlnpilot.episode import EpisodeConfig, run_episode
+from vlnpilot.episode.config import EpisodeConfig
+from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.tasks import parse_query
+from vlnpilot.tasks.task import parse_query
 
 fake = FakeOpenAI().start()  # left running: its hung answers would keep an abandoned call waiting
 fake.push("hang", times=20, seconds=600.0)

@@ -13,7 +13,7 @@ from PIL import Image
 
 from fakes import FakeOpenAI, sample_image
 from vlnpilot import cli
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.server import create_app
 from vlnpilot.server.app import serve

@@ -87,7 +87,7 @@ def auto_decision(request: RecordedRequest | None = None) -> dict[str, str]:
     if request is not None:
         moves, states = request.allowed_movements, request.allowed_states
         if (moves is None or states is None) and request.current_state:
-            from vlnpilot.fsm import state_spec
+            from vlnpilot.core.fsm import state_spec
 
             try:
                 spec = state_spec(request.current_state)

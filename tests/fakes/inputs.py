@@ -6,8 +6,8 @@ from typing import Any
 
 import numpy as np
 
-from vlnpilot.decision import PilotInput
-from vlnpilot.fsm import State
+from vlnpilot.core.decision import PilotInput
+from vlnpilot.core.fsm import State
 
 SAMPLE_MAP: dict[str, Any] = {
     "nodes": [{"id": "hall", "name": "Hall"}, {"id": "kitchen", "name": "Kitchen"},

@@ -6,7 +6,7 @@ import threading
 from collections import deque
 from typing import Any
 
-from vlnpilot.decision import Decision, PilotInput, Usage
+from vlnpilot.core.decision import Decision, PilotInput, Usage
 from vlnpilot.pilots.base import register_pilot
 
 DEFAULT_DECISION = Decision(room="hall", movement="A1", state="Search Object", description="scripted",

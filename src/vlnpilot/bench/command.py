@@ -33,7 +33,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
 
         console = Console(stderr=True)
     if out is None:
-        from vlnpilot.record import default_run_dir
+        from vlnpilot.core.rundir import default_run_dir
 
         if resume:
             raise BenchError("--resume needs --out: the bench directory to resume")

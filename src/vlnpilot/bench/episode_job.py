@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.core.errors import ConfigError, VLNPilotError
 
 
 @dataclass(frozen=True)
@@ -138,12 +138,12 @@ def _pilot_options(spec: EpisodeSpec) -> dict[str, Any]:
 
 def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any]:
     """Fly and record one episode; the results.jsonl record (without the parent's fields)."""
-    from vlnpilot.episode import EpisodeConfig
-    from vlnpilot.episode_run import run_recorded_episode
+    from vlnpilot.core.rundir import git_sha
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.prompting import prompt_hash
-    from vlnpilot.record import git_sha
-    from vlnpilot.tasks import Task
+    from vlnpilot.prompting.render import prompt_hash
+    from vlnpilot.tasks.task import Task
 
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg)
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))

@@ -31,7 +31,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from vlnpilot.bench.episode_job import EpisodeSpec, Event, SimulatorCache, import_plugins, run_guarded
-from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
+from vlnpilot.core.registry import Registry
 
 
 class BenchError(VLNPilotError):
@@ -58,28 +59,28 @@ class ExecutorOptions:
 
 
 ExecutorFactory = Callable[[ExecutorOptions], Executor]
-_EXECUTORS: dict[str, ExecutorFactory] = {}
+# Built-in executors register below; `ray` registers itself when its module is imported (only when asked for);
+# third parties register with `@register_executor` in a --plugin module or through the `vlnpilot.executors`
+# entry-point group.
+EXECUTOR_REGISTRY: Registry[ExecutorFactory] = Registry(
+    "executor", group="vlnpilot.executors", builtins={"ray": "vlnpilot.bench.ray_executor"})
 
 
 def register_executor(name: str) -> Callable[[ExecutorFactory], ExecutorFactory]:
     """Register an executor factory (ExecutorOptions -> Executor) under a name."""
-
-    def deco(factory: ExecutorFactory) -> ExecutorFactory:
-        _EXECUTORS[name] = factory
-        return factory
-
-    return deco
+    return EXECUTOR_REGISTRY.register(name)
 
 
 def executor_names() -> tuple[str, ...]:
-    return tuple(_EXECUTORS)
+    return tuple(EXECUTOR_REGISTRY.names())
 
 
 def executor_factory(name: str) -> ExecutorFactory:
     """The registered factory of an executor name; a bad name lists the known ones (before anything runs)."""
-    if name not in _EXECUTORS:
-        raise ConfigError(f"unknown executor {name!r}; valid executors: {', '.join(_EXECUTORS)}")
-    return _EXECUTORS[name]
+    try:
+        return EXECUTOR_REGISTRY.get(name)
+    except UnknownNameError as exc:
+        raise ConfigError(exc.args[0]) from None
 
 
 def make_executor(name: str, *, workers: int | None = None, ray_address: str | None = None,
@@ -262,13 +263,6 @@ class LocalExecutor:
 @register_executor("local")
 def _local(options: ExecutorOptions) -> Executor:
     return LocalExecutor(options.workers, options.plugins)
-
-
-@register_executor("ray")
-def _ray(options: ExecutorOptions) -> Executor:
-    from vlnpilot.bench.ray_executor import RayExecutor  # Ray is optional: imported only when asked for
-
-    return RayExecutor(options.workers, options.ray_address, options.plugins)
 
 
 @register_executor("inline")

@@ -11,7 +11,7 @@ import random
 import re
 from typing import Any
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.scene import load_scene
 from vlnpilot.scene.model import Scene
 

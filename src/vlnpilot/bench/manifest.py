@@ -17,7 +17,7 @@ from typing import Any
 
 from vlnpilot.bench.executors import BenchError
 from vlnpilot.bench.results import ResultsLog
-from vlnpilot.record import write_json_atomic
+from vlnpilot.core.rundir import write_json_atomic
 
 MANIFEST = "bench.json"
 LOCK = ".bench.lock"

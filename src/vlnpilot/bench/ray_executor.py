@@ -9,7 +9,7 @@ from collections.abc import Iterator, Sequence
 from typing import Any
 
 from vlnpilot.bench.episode_job import EpisodeSpec, Event, SimulatorCache, import_plugins, run_guarded
-from vlnpilot.bench.executors import BenchError, split_workers
+from vlnpilot.bench.executors import BenchError, Executor, ExecutorOptions, register_executor, split_workers
 
 
 class RayExecutor:
@@ -88,3 +88,8 @@ class _RayWorker:
     def run(self, spec: EpisodeSpec) -> tuple[dict[str, Any] | None, str | None, str]:
         record, error = run_guarded(spec, self.sims)
         return record, error, self.name
+
+
+@register_executor("ray")
+def _ray(options: ExecutorOptions) -> Executor:
+    return RayExecutor(options.workers, options.ray_address, options.plugins)

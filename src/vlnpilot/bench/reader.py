@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.bench.results import RESULTS
-from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.core.errors import ConfigError, VLNPilotError
 
 
 @dataclass(frozen=True)

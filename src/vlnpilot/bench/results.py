@@ -16,8 +16,8 @@ from dataclasses import dataclass, make_dataclass
 from pathlib import Path
 from typing import Any
 
-from vlnpilot import episode_measures
-from vlnpilot.episode_measures import Aggregate, Mean
+from vlnpilot.episode import measures as episode_measures
+from vlnpilot.episode.measures import Aggregate, Mean
 
 RESULTS = "results.jsonl"
 Z95 = 1.959963984540054  # two-sided 95% normal quantile

@@ -29,10 +29,10 @@ from vlnpilot.bench.manifest import FORMAT, MANIFEST, BenchManifest, bench_lock,
 from vlnpilot.bench.results import RESULTS, PilotSummary, ResultsLog, episode_key, record_key, summarize
 from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dict
 from vlnpilot.bench.tables import render_tables
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.fileio import write_atomic
-from vlnpilot.fsm import PROFILES
-from vlnpilot.record import check_writable, default_run_dir, git_sha, package_versions
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.fileio import write_atomic
+from vlnpilot.core.fsm import PROFILES
+from vlnpilot.core.rundir import check_writable, default_run_dir, git_sha, package_versions
 
 _FAIL_FAST = 3  # abort when this many episodes failed before any finished: something systemic is wrong
 
@@ -332,7 +332,7 @@ def _fly(settings: BenchSettings, flight: _Flight, todo: Sequence[EpisodeSpec], 
 
 def _check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
     """Build one EpisodeConfig now, so that a bad shield or option is refused before anything runs."""
-    from vlnpilot.episode import EpisodeConfig
+    from vlnpilot.episode.config import EpisodeConfig
 
     reserved = sorted({"max_steps", "profile", "seed"} & set(options))
     if reserved:
@@ -345,7 +345,7 @@ def _check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
 
 
 def _prompt_hash(profile: str) -> str:
-    from vlnpilot.prompting import prompt_hash
+    from vlnpilot.prompting.render import prompt_hash
 
     return prompt_hash(profile)
 

@@ -28,11 +28,11 @@ from typing import Any
 import yaml
 
 from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
-from vlnpilot.errors import ConfigError, VLNPilotError
-from vlnpilot.fsm import PROFILES
+from vlnpilot.core.errors import ConfigError, VLNPilotError
+from vlnpilot.core.fsm import PROFILES
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
-from vlnpilot.tasks import Task, parse_query
+from vlnpilot.tasks.task import Task, parse_query
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
              "spawn_labels", "rows")

@@ -17,10 +17,10 @@ from collections.abc import Sequence
 from itertools import groupby
 from typing import Any
 
-from vlnpilot import episode_measures
 from vlnpilot.bench.results import CellStats, PilotSummary, cell_stats, summarize
 from vlnpilot.bench.suite import Suite, SuiteRow, episode_seed
-from vlnpilot.episode_measures import Column, column
+from vlnpilot.episode import measures as episode_measures
+from vlnpilot.episode.measures import Column, column
 
 TABLE_MD, TABLE_CSV, TABLE_TEX, SUMMARY_CSV = "table.md", "table.csv", "table.tex", "summary.csv"
 LEGEND = ("Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; Steps = episodes "

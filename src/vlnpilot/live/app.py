@@ -23,10 +23,10 @@ from fastapi import FastAPI, Header, HTTPException, Request
 from fastapi.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from pydantic import BaseModel, Field
 
+from vlnpilot.core.rundir import FRAMES
 from vlnpilot.live.control import LiveControl, Refused
 from vlnpilot.live.feed import RunFeed
 from vlnpilot.live.plan import plan_png, state_colors
-from vlnpilot.record import FRAMES
 
 POLL_S = 0.1  # how often a connection looks for new steps: well within the 1 s the page has to show one
 FRAME_NAME = re.compile(r"^(front|rear)_\d{3,}\.jpg$")

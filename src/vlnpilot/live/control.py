@@ -11,10 +11,10 @@ from __future__ import annotations
 import threading
 from typing import Any
 
-from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.episode import Gate
-from vlnpilot.errors import VLNPilotError
-from vlnpilot.fsm import state_spec
+from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.fsm import state_spec
+from vlnpilot.episode.config import Gate
 from vlnpilot.pilots.base import Pilot, PilotError
 from vlnpilot.pilots.keyboard import KeyboardPilot, human_decision
 

@@ -10,7 +10,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.record import EPISODE, SUMMARY
+from vlnpilot.core.rundir import EPISODE, SUMMARY
 
 
 class RunFeed:

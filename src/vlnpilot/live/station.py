@@ -16,11 +16,11 @@ from typing import Any
 
 import uvicorn
 
-from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.core.errors import ConfigError, VLNPilotError
+from vlnpilot.core.rundir import load_run
 from vlnpilot.live.app import create_live_app
 from vlnpilot.live.control import LiveControl
 from vlnpilot.pilots.base import Pilot
-from vlnpilot.record import load_run
 from vlnpilot.scene import load_scene
 from vlnpilot.server.app import is_loopback
 

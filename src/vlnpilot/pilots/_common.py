@@ -19,8 +19,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Literal, TypeVar
 
-from vlnpilot import pricing
-from vlnpilot.decision import (
+from vlnpilot.core.decision import (
     DECISION_ERROR_CODES,
     INVALID_ENUM,
     MAX_REPLY_CHARS,
@@ -33,6 +32,7 @@ from vlnpilot.decision import (
     parse_decision,
     validate_decision,
 )
+from vlnpilot.pilots import pricing
 from vlnpilot.pilots._gate import CallGate
 from vlnpilot.pilots.base import PilotError
 from vlnpilot.pilots.options import ModelOptions
@@ -337,7 +337,7 @@ class ModelPilot:
 
     # -- the skeleton
     def decide(self, pilot_input: PilotInput) -> Decision:
-        from vlnpilot.prompting import build_prompt
+        from vlnpilot.prompting.render import build_prompt
 
         prompt = build_prompt(pilot_input, jpeg_quality=self.jpeg_quality, max_side=self.max_side)
         self._gate.enter()

@@ -1,4 +1,4 @@
-"""The Pilot protocol, PilotError and the pilot registry (the input and answer types are `vlnpilot.decision`)."""
+"""The Pilot protocol, PilotError and the pilot registry (the input and answer types are `vlnpilot.core.decision`)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.errors import UnknownNameError, VLNPilotError
+from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 
 
@@ -45,7 +46,13 @@ class Registration:
     options: type[PilotOptions]
 
 
-_REGISTRY: dict[str, Registration] = {}
+# The built-in pilots' modules are imported only when their name is asked for, so that the oracle never pays for
+# the provider SDKs' import time; third parties register with `@register_pilot` in a module of theirs, loaded
+# by `--plugin` or through the `vlnpilot.pilots` entry-point group.
+PILOT_REGISTRY: Registry[Registration] = Registry("pilot", group="vlnpilot.pilots", builtins={
+    name: f"vlnpilot.pilots.{module}" for name, module in {
+        "oracle": "oracle", "openai": "openai", "gemini": "gemini", "anthropic": "anthropic", "remote": "remote",
+        "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy", "files": "files"}.items()})
 
 
 def register_pilot(name: str, *, options: type[PilotOptions] = OpenPilotOptions
@@ -56,34 +63,14 @@ def register_pilot(name: str, *, options: type[PilotOptions] = OpenPilotOptions
     """
 
     def deco(factory: PilotFactory) -> PilotFactory:
-        _REGISTRY[name] = Registration(factory, options)
+        PILOT_REGISTRY.add(name, Registration(factory, options))
         return factory
 
     return deco
 
 
-_BUILTIN_MODULES = {"oracle": "oracle", "openai": "openai", "gemini": "gemini", "anthropic": "anthropic",
-                    "remote": "remote", "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy",
-                    "files": "files"}
-
-
-def _load_builtin_pilots(only: str | None = None) -> None:
-    """Import pilot modules (lazily, so that the oracle never pays for the provider SDKs' import time)."""
-    import importlib
-
-    modules = [_BUILTIN_MODULES[only]] if only in _BUILTIN_MODULES else sorted(set(_BUILTIN_MODULES.values()))
-    for module in modules:
-        try:
-            importlib.import_module(f"vlnpilot.pilots.{module}")
-        except ModuleNotFoundError as exc:  # a pilot module that does not exist in this version
-            if exc.name and exc.name.startswith("vlnpilot.pilots."):
-                continue
-            raise
-
-
 def known_pilots() -> list[str]:
-    _load_builtin_pilots()
-    return sorted(_REGISTRY)
+    return sorted(PILOT_REGISTRY.names())
 
 
 def parse_spec(spec: str) -> tuple[str, str | None]:
@@ -94,12 +81,7 @@ def parse_spec(spec: str) -> tuple[str, str | None]:
 
 def registration(name: str) -> Registration:
     """The registration of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
-    _load_builtin_pilots(only=name)
-    if name not in _REGISTRY:
-        _load_builtin_pilots()
-    if name not in _REGISTRY:
-        raise UnknownNameError("pilot", name, _REGISTRY)
-    return _REGISTRY[name]
+    return PILOT_REGISTRY.get(name)
 
 
 def pilot_factory(name: str) -> PilotFactory:

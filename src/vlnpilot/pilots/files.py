@@ -38,12 +38,12 @@ from typing import Any, ClassVar
 from PIL import Image
 from pydantic import Field
 
-from vlnpilot.decision import FIELDS, Decision, PilotInput, Usage, parse_decision
-from vlnpilot.errors import ConfigError
-from vlnpilot.fileio import write_atomic
+from vlnpilot.core.decision import FIELDS, Decision, PilotInput, Usage, parse_decision
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fileio import write_atomic
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
-from vlnpilot.prompting import build_prompt
+from vlnpilot.prompting.render import build_prompt
 
 # The files a run writes (NNN.png, NNN.prompt.md, NNN.answer.json, their temp files, and the fixed names):
 # they decide whether DIR already holds another run, and they are the only files `overwrite` deletes.

@@ -21,7 +21,7 @@ from google import genai
 from google.genai import errors as genai_errors
 from google.genai import types
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots._common import (
     HTTPX_TIMEOUTS,
     HTTPX_TRANSPORT_ERRORS,

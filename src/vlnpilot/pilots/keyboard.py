@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from typing import Protocol
 
-from vlnpilot.decision import Decision, PilotInput
+from vlnpilot.core.decision import Decision, PilotInput
 from vlnpilot.pilots.base import Pilot
 
 HUMAN = "human"  # the `model` of a decision a person made

@@ -27,14 +27,14 @@ from typing import Annotated, Any
 import numpy as np
 from pydantic import Field, field_validator
 
-from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.fsm import State
+from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import Pose, wrap_deg
 from vlnpilot.pilots.base import register_pilot
 from vlnpilot.pilots.oracle import OracleOptions, OraclePilot
 from vlnpilot.safety import ASSIST_NOTE, GUARD_NOTE, SHIELD_NOTE
 from vlnpilot.scene.model import Door
-from vlnpilot.tasks import parse_query
-from vlnpilot.types import Pose, wrap_deg
+from vlnpilot.tasks.task import parse_query
 
 OBJECT_KEY = "object"
 Probability = Annotated[float, Field(ge=0.0, le=1.0)]

@@ -14,8 +14,8 @@ from typing import Any, ClassVar
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError
 
-from vlnpilot.errors import ConfigError
-from vlnpilot.exits import shorten
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.exits import shorten
 
 
 class PilotOptions(BaseModel):

@@ -14,16 +14,16 @@ from typing import Any, ClassVar
 
 from pydantic import Field
 
-from vlnpilot.commands import COMMANDS, Kind
-from vlnpilot.decision import Decision, PilotInput
-from vlnpilot.errors import VLNPilotError
-from vlnpilot.fsm import State, state_spec
+from vlnpilot.core.commands import COMMANDS, Kind
+from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.fsm import State, state_spec
+from vlnpilot.core.records import GroundTruth, Pose, wrap_deg
+from vlnpilot.core.tello_spec import horizontal_fov_deg
 from vlnpilot.pilots.base import register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.scene.model import Door
-from vlnpilot.tasks import SuccessConfig, Task, parse_query
-from vlnpilot.tello_spec import horizontal_fov_deg
-from vlnpilot.types import GroundTruth, Pose, wrap_deg
+from vlnpilot.tasks.task import SuccessConfig, Task, parse_query
 
 ALIGN_DEG = 7.5  # half of the smallest rotation: closer than this cannot be improved
 HALF_HFOV = horizontal_fov_deg() / 2

@@ -16,8 +16,8 @@ from typing import Any, ClassVar
 import httpx
 from pydantic import Field, SecretStr
 
-from vlnpilot.decision import Decision, PilotInput, Usage
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.decision import Decision, PilotInput, Usage
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots._common import (
     REPLY_REASONS,
     PilotReplyError,
@@ -104,7 +104,7 @@ class RemotePilot:
         self._client.close()
 
     def _payload(self, pilot_input: PilotInput) -> dict[str, Any]:
-        from vlnpilot.prompting import encode_jpeg
+        from vlnpilot.prompting.render import encode_jpeg
 
         jpeg = encode_jpeg(pilot_input.image, self.jpeg_quality, self.max_side)
         payload: dict[str, Any] = {

@@ -12,12 +12,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.context import context_name
-from vlnpilot.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.rundir import load_run, load_trial
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
-from vlnpilot.record import load_run, load_trial
+from vlnpilot.prompting.context import context_name
 
 _MALFORMED = "malformed answer: "
 _INVALID_PREFIXES = ("movement ", "next state ")  # validate_decision's reasons

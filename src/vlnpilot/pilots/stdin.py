@@ -21,11 +21,11 @@ from typing import IO, Any, ClassVar
 
 from pydantic import Field
 
-from vlnpilot.decision import Decision, PilotInput, Usage, parse_decision
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.decision import Decision, PilotInput, Usage, parse_decision
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
-from vlnpilot.prompting import build_prompt
+from vlnpilot.prompting.render import build_prompt
 
 RULE = "=" * 100
 

@@ -10,8 +10,8 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.bench.reader import BenchData, load_bench
-from vlnpilot.errors import VLNPilotError
-from vlnpilot.fileio import write_atomic
+from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.fileio import write_atomic
 from vlnpilot.report.episode_page import write_episode_report
 from vlnpilot.report.page import PLOTS, REPORT, RESULTS, _cost, _css_rgb, _fact, _int, _num, _page, esc
 from vlnpilot.report.timeline import load_scene_or_none

@@ -8,7 +8,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.fileio import write_atomic
+from vlnpilot.core.fileio import write_atomic
 from vlnpilot.report.page import (
     FLOORPLAN,
     REPORT,

@@ -22,8 +22,8 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Circle, Ellipse, FancyArrow, Patch, Polygon  # noqa: E402
 
-from vlnpilot.errors import UnknownNameError  # noqa: E402
-from vlnpilot.fsm import ASKED_STATES
+from vlnpilot.core.errors import UnknownNameError  # noqa: E402
+from vlnpilot.core.fsm import ASKED_STATES
 from vlnpilot.scene.model import EXTERIOR, Door, Room, Scene, Solid  # noqa: E402
 
 WALL_COLOR = "0.35"

@@ -59,7 +59,7 @@ def _css_rgb(color: Iterable[float] | None) -> str:
 def _command_text(code: str | None) -> str:
     if not code:
         return ""
-    from vlnpilot.commands import COMMANDS
+    from vlnpilot.core.commands import COMMANDS
 
     cmd = COMMANDS.get(str(code).strip().upper())
     return cmd.description if cmd is not None else "not a command"

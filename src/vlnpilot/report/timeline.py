@@ -14,8 +14,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.episode_record import step_keys
-from vlnpilot.record import load_run
+from vlnpilot.core.rundir import load_run
+from vlnpilot.episode.record import step_keys
 
 # Step-record keys of the safety layer (`vlnpilot.safety`): commands it changed, oscillation events, and the
 # feedback it puts into the next prompt. Absent in runs recorded before it existed.
@@ -143,7 +143,7 @@ def load_scene_or_none(name: str | None) -> Any | None:
     """
     if not name:
         return None
-    from vlnpilot.errors import VLNPilotError
+    from vlnpilot.core.errors import VLNPilotError
     from vlnpilot.scene import load_scene
 
     try:

@@ -139,7 +139,7 @@ class _Composer:
         return np.asarray(img)
 
     def _move_text(self, entry: Entry) -> str:
-        from vlnpilot.commands import COMMANDS
+        from vlnpilot.core.commands import COMMANDS
 
         if not entry.executed:
             return "no valid decision: episode stopped"

@@ -18,10 +18,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.records import Motion, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.emulator_video import VideoStreamer
-from vlnpilot.types import Motion, Pose, wrap_deg
 
 MOVES = {"forward": (1, 0, 0), "back": (-1, 0, 0), "left": (0, 1, 0), "right": (0, -1, 0),
          "up": (0, 0, 1), "down": (0, 0, -1)}

@@ -6,7 +6,7 @@ import sys
 from collections.abc import Callable
 from typing import IO
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 
 JUDGES = ("ask", "none")
 

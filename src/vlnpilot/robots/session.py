@@ -9,8 +9,8 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.environment import Capabilities
-from vlnpilot.errors import ConfigError, UnknownNameError
+from vlnpilot.core.environment import Capabilities
+from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.scene import Scene
 
 ROBOTS = ("sim", "tello")

@@ -20,15 +20,15 @@ from typing import Any
 
 import numpy as np
 
-from vlnpilot.commands import Command, Kind, get_command
-from vlnpilot.environment import Capabilities
-from vlnpilot.errors import RobotHalt
+from vlnpilot.core.commands import Command, Kind, get_command
+from vlnpilot.core.environment import Capabilities
+from vlnpilot.core.errors import RobotHalt
+from vlnpilot.core.records import Motion, Observation, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.operator import ConsoleOperator
 from vlnpilot.robots.tello_config import TelloConfig, load_tello_config
 from vlnpilot.robots.tello_link import RobotError, TelloLink
 from vlnpilot.scene import Scene, Spawn, load_scene
-from vlnpilot.types import Motion, Observation, Pose, wrap_deg
 
 NO_REAR = np.zeros((1, 1, 3), np.uint8)  # the Tello has no rear camera (recordings skip 1x1 placeholders)
 SDK_MIN_CM = 20

@@ -12,7 +12,7 @@ from typing import Any
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 
 DEFAULTS = Path(__file__).with_name("tello.yaml")
 ENV_VAR = "VLN_PILOT_TELLO_CONFIG"

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from vlnpilot.errors import VLNPilotError
+from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.robots.clock import Clock
 from vlnpilot.robots.tello_config import TelloConfig
 

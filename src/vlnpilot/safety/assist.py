@@ -6,12 +6,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vlnpilot import tello_spec
-from vlnpilot.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.core import tello_spec
+from vlnpilot.core.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.core.records import Motion, Pose, wrap_deg
 from vlnpilot.safety.config import SafetyConfig
 from vlnpilot.safety.shields import _fractions, outline_corners
 from vlnpilot.scene.model import Door, Scene
-from vlnpilot.types import Motion, Pose, wrap_deg
 
 
 # -- door-crossing assist ---------------------------------------------------------------------------------------

@@ -5,9 +5,9 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from vlnpilot.commands import Command
-from vlnpilot.errors import ConfigError
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import Command
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import State
 
 SHIELDS = ("off", "geometry", "depth", "assist")  # assist: door assist and oscillation guard, no shield (a Tello)
 DEFAULT_SHIELD = "geometry"  # the CLI's default in the simulator; the library default stays "off" (paper behaviour)

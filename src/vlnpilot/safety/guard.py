@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections import deque
 
-from vlnpilot.commands import OPPOSITE, Command, Kind
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import OPPOSITE, Command, Kind
+from vlnpilot.core.fsm import State
 from vlnpilot.safety.config import OscillationConfig
 
 

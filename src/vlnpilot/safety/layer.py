@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from vlnpilot.commands import COMMANDS, HOVER, Command, Kind
-from vlnpilot.environment import Environment
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.core.environment import Environment
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import Observation, Pose
 from vlnpilot.safety.assist import DoorAssist
 from vlnpilot.safety.config import (
     ASSIST_NOTE,
@@ -19,7 +20,6 @@ from vlnpilot.safety.config import (
 from vlnpilot.safety.guard import OscillationGuard
 from vlnpilot.safety.shields import Shield, make_shield
 from vlnpilot.scene.model import Scene
-from vlnpilot.types import Observation, Pose
 
 
 # -- the layer the controller uses ---------------------------------------------------------------------------------

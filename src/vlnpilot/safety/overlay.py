@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from vlnpilot import tello_spec
+from vlnpilot.core import tello_spec
 
 
 # -- visual aid for the model -------------------------------------------------------------------------------------

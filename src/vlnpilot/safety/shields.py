@@ -8,12 +8,12 @@ from typing import Protocol
 
 import numpy as np
 
-from vlnpilot import tello_spec
-from vlnpilot.commands import COMMANDS, HOVER, Command, Kind
-from vlnpilot.environment import Environment, capabilities_of, depth_sensing_of, ground_truth_of, usable_shields
-from vlnpilot.errors import ConfigError, UnknownNameError
+from vlnpilot.core import tello_spec
+from vlnpilot.core.commands import COMMANDS, HOVER, Command, Kind
+from vlnpilot.core.environment import Environment, capabilities_of, depth_sensing_of, ground_truth_of, usable_shields
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.records import Motion, Observation, Pose
 from vlnpilot.safety.config import _MIN_CLEARANCE, SHIELDS, SafetyConfig, obstacle_kind
-from vlnpilot.types import Motion, Observation, Pose
 
 
 # -- geometry helpers -------------------------------------------------------------------------------------------

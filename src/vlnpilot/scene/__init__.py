@@ -4,13 +4,17 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from vlnpilot.errors import UnknownNameError
+from vlnpilot.core.errors import UnknownNameError
+from vlnpilot.core.registry import Registry
 from vlnpilot.scene.cabin import cabin, cabin_v1
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
 from vlnpilot.scene.houses import load_house
 from vlnpilot.scene.model import Door, Room, Scene, Solid, Spawn, Target
 
-SCENES: dict[str, Callable[[], Scene]] = {"cabin": cabin, "cabin-v1": cabin_v1}
+# Scenes by name; a third party registers with `SCENES.register("NAME")` or the `vlnpilot.scenes` entry points.
+SCENES: Registry[Callable[[], Scene]] = Registry("scene", group="vlnpilot.scenes")
+SCENES.add("cabin", cabin)
+SCENES.add("cabin-v1", cabin_v1)
 
 
 def load_scene(name: str | Scene = "cabin") -> Scene:
@@ -18,10 +22,10 @@ def load_scene(name: str | Scene = "cabin") -> Scene:
         return name
     if str(name).strip().lower().startswith(HOUSE_PREFIX):  # procedural: house:SEED[?rooms=N&types=...]
         return load_house(str(name))
-    try:
-        return SCENES[str(name).strip().lower()]()
-    except KeyError:
-        raise UnknownNameError("scene", name, [*SCENES, "house:SEED"]) from None
+    key = str(name).strip().lower()
+    if key not in SCENES:
+        raise UnknownNameError("scene", name, [*SCENES, "house:SEED"])
+    return SCENES.get(key)()
 
 
 __all__ = ["SCENES", "Door", "Room", "Scene", "Solid", "Spawn", "Target", "load_scene"]

@@ -20,9 +20,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 from functools import cache
 
+from vlnpilot.core.records import Pose
 from vlnpilot.scene.model import EXTERIOR, Door, Light, Material, Room, Scene, Solid, Spawn, Target
 from vlnpilot.scene.parts import box, cyl, doorway, ellipsoid, wall, window
-from vlnpilot.types import Pose
 
 # -- names (one constants block for the scene) ----------------------------------------------------
 LIVING_ROOM, BEDROOM, BATHROOM = "living_room", "bedroom", "bathroom"

@@ -11,11 +11,11 @@ from __future__ import annotations
 import random
 from dataclasses import dataclass, field
 
+from vlnpilot.core.records import Pose
 from vlnpilot.scene.furniture import FURNITURE, Piece, WallFrame, centrepiece
 from vlnpilot.scene.layout import Plan, PlanRoom
 from vlnpilot.scene.model import Solid, Spawn, Target
 from vlnpilot.scene.validate import VIEW_M
-from vlnpilot.types import Pose
 
 WALL_IN = 0.05  # each room's half of a wall stands this far inside its floor polygon
 DOOR_KEEP_DEPTH, DOOR_KEEP_SIDE = 1.3, 0.3  # in front of an open door; a closed one keeps CLOSED_KEEP_DEPTH

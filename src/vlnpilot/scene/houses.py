@@ -16,7 +16,7 @@ import re
 from dataclasses import dataclass
 from functools import lru_cache
 
-from vlnpilot.errors import ConfigError, VLNPilotError
+from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.scene.furnish import FurnishError, furnish_room, place_spawn
 from vlnpilot.scene.house_structure import furniture_materials, lights, room_materials, shell, to_door
 from vlnpilot.scene.layout import HALLWAY, Plan, plan_house

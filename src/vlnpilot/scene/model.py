@@ -10,8 +10,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from vlnpilot.errors import UnknownNameError
-from vlnpilot.types import Pose
+from vlnpilot.core.errors import UnknownNameError
+from vlnpilot.core.records import Pose
 
 Point2 = tuple[float, float]
 Vec3 = tuple[float, float, float]

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vlnpilot import tello_spec
+from vlnpilot.core import tello_spec
 from vlnpilot.scene.model import Scene
 
 CELL_M = 0.04

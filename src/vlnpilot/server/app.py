@@ -33,10 +33,10 @@ from fastapi.security import HTTPAuthorizationCredentials, HTTPBearer
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
-from vlnpilot.commands import COMMANDS, get_command
-from vlnpilot.decision import DecisionFields, PilotInput, Usage
-from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
-from vlnpilot.fsm import ASKED_STATES, PROFILES, parse_state
+from vlnpilot.core.commands import COMMANDS, get_command
+from vlnpilot.core.decision import DecisionFields, PilotInput, Usage
+from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
+from vlnpilot.core.fsm import ASKED_STATES, PROFILES, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
 from vlnpilot.pilots.base import Pilot, PilotError, make_pilot
 from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, refuse_privileged

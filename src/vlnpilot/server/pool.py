@@ -12,7 +12,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from typing import Any
 
-from vlnpilot.errors import ConfigError, UnknownNameError
+from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.pilots.base import Pilot, close_pilot, parse_spec, pilot_factory, pilot_options_class
 
 DEFAULT_MAX_CACHED = 8

@@ -6,7 +6,7 @@ discs are separate collision geoms so that a propeller tip clipping a door frame
 
 from __future__ import annotations
 
-from vlnpilot.tello_spec import (  # noqa: F401  (re-exported for the simulator)
+from vlnpilot.core.tello_spec import (  # noqa: F401  (re-exported for the simulator)
     DIAGONAL_FOV_DEG,
     HEIGHT,
     LENGTH,

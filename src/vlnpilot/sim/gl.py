@@ -6,7 +6,7 @@ import ctypes.util
 import os
 
 import vlnpilot
-from vlnpilot.errors import RenderBackendError
+from vlnpilot.core.errors import RenderBackendError
 
 INSTALL_HINT = "sudo apt-get install -y libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 (or run `make sysdeps`)"
 _LIBS = {"egl": ("EGL", "GL"), "osmesa": ("OSMesa",), "glfw": ("GL",)}

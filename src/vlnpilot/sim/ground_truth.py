@@ -3,21 +3,35 @@
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol
 
+from vlnpilot.core.records import Motion, Pose, wrap_deg
 from vlnpilot.scene import Scene
-from vlnpilot.types import Motion, Pose, wrap_deg
-
-if TYPE_CHECKING:
-    from vlnpilot.sim.simulator import Simulator
 
 VISIBLE_MIN_FRACTION = 0.004  # share of the (low-resolution) front image a target must cover to count as seen
+
+
+class SimulatorView(Protocol):
+    """What the ground truth reads of the simulator (`sim.simulator.Simulator` implements it); named here so that
+    this module does not import the simulator that creates it."""
+
+    @property
+    def scene(self) -> Scene: ...
+    @property
+    def pose(self) -> Pose: ...
+    @property
+    def step_count(self) -> int: ...
+
+    def target_pixel_fraction(self, target_id: str) -> float: ...
+    def contact_at(self, pose: Pose) -> tuple[str, str] | None: ...
+    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None: ...
+    def substeps(self, motion: Motion) -> int: ...
 
 
 class SimGroundTruth:
     """Ground truth read from the simulator; it exposes facts, never the simulator object itself."""
 
-    def __init__(self, sim: Simulator, visible_min_fraction: float = VISIBLE_MIN_FRACTION):
+    def __init__(self, sim: SimulatorView, visible_min_fraction: float = VISIBLE_MIN_FRACTION):
         self._sim = sim
         self._min_fraction = visible_min_fraction
         self._cache: dict[tuple[int, Pose, str], float] = {}

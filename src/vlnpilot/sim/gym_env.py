@@ -14,11 +14,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from vlnpilot.commands import COMMANDS, Command
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.commands import COMMANDS, Command
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.records import Observation, Pose
 from vlnpilot.scene import Scene, Spawn, load_scene
 from vlnpilot.sim.simulator import SimConfig, Simulator
-from vlnpilot.types import Observation, Pose
 
 ENV_ID = "VLNPilot/Cabin-v0"
 HOUSE_ENV_ID = "VLNPilot/House-v0"

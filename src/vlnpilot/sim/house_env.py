@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from vlnpilot.commands import COMMANDS
+from vlnpilot.core.commands import COMMANDS
 from vlnpilot.scene.houses import HouseSpec
 from vlnpilot.sim.gym_env import CabinEnv
 

@@ -13,16 +13,16 @@ from dataclasses import dataclass, replace
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from vlnpilot.commands import Command, get_command  # noqa: E402
-from vlnpilot.environment import Capabilities  # noqa: E402
-from vlnpilot.errors import ConfigError, UnknownNameError  # noqa: E402
+from vlnpilot.core.commands import Command, get_command  # noqa: E402
+from vlnpilot.core.environment import Capabilities  # noqa: E402
+from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
+from vlnpilot.core.records import GroundTruth, Motion, Observation, Pose  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import (
     drone,  # noqa: E402
     gl,  # noqa: F401  (selects the headless GL backend before mujoco is imported)
 )
-from vlnpilot.types import GroundTruth, Motion, Observation, Pose  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
 

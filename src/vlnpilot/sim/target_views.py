@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
+from vlnpilot.core.records import Pose
 from vlnpilot.sim.simulator import Simulator
-from vlnpilot.types import Pose
 
 
 def standpoint(sim: Simulator, target_id: str, distance: float) -> Pose:

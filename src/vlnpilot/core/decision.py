@@ -19,9 +19,9 @@ from typing import Any, Literal, get_args
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
-from vlnpilot.commands import get_command
-from vlnpilot.errors import UnknownNameError, VLNPilotError
-from vlnpilot.fsm import State, parse_state, state_spec
+from vlnpilot.core.commands import get_command
+from vlnpilot.core.errors import UnknownNameError, VLNPilotError
+from vlnpilot.core.fsm import State, parse_state, state_spec
 
 DoorPosition = Literal["left", "center", "right", "not_visible"]
 DOOR_POSITIONS: tuple[str, ...] = get_args(DoorPosition)
@@ -95,7 +95,7 @@ class PilotInput:
     step: int = 0
     profile: str = "paper"  # FSM profile: which moves each state allows
     feedback: tuple[str, ...] = ()  # validation errors of a re-ask, shield and oscillation notes
-    context: tuple[str, ...] = ()  # pilot context beyond the paper (vlnpilot.context): odometry, budget, memory
+    context: tuple[str, ...] = ()  # pilot context beyond the paper (prompting.context): odometry, budget, memory
 
 
 class DecisionError(VLNPilotError):

@@ -23,8 +23,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from vlnpilot.commands import COMMANDS
-from vlnpilot.errors import UnknownNameError
+from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.errors import UnknownNameError
 
 
 class State(StrEnum):

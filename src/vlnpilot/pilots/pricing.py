@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 
 PRICES_AS_OF = "2025-12-01"
 """When the built-in table was compiled from the providers' public price pages (standard tier,

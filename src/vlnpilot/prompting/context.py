@@ -16,9 +16,9 @@ from collections import deque
 from dataclasses import asdict, dataclass, replace
 from typing import Any
 
-from vlnpilot.commands import Command
-from vlnpilot.errors import ConfigError, UnknownNameError
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import Command
+from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.fsm import State
 
 CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends the episode and cannot be undone. "
                 "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "

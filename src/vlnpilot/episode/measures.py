@@ -24,12 +24,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, make_dataclass
 from typing import Any, ClassVar, Protocol
 
-from vlnpilot.commands import Command
-from vlnpilot.decision import Usage
+from vlnpilot.core.commands import Command
+from vlnpilot.core.decision import Usage
+from vlnpilot.core.records import Pose
 from vlnpilot.safety import SafetyLayer
 from vlnpilot.scene.model import Scene
-from vlnpilot.tasks import Oscillations, PathLength, SuccessConfig, Task, shortest_path_length, spl
-from vlnpilot.types import Pose
+from vlnpilot.tasks.task import Oscillations, PathLength, SuccessConfig, Task, shortest_path_length, spl
 
 Result = dict[str, Any]  # one episode's result as recorded (`EpisodeResult.to_dict()`, a line of results.jsonl)
 

@@ -10,12 +10,14 @@ from __future__ import annotations
 import contextlib
 from pathlib import Path
 
-from vlnpilot.environment import Environment
-from vlnpilot.episode import EpisodeConfig, EpisodeResult, JudgeOutcome, LoopControl, run_episode
-from vlnpilot.episode_record import StepCallback
+from vlnpilot.core.environment import Environment
+from vlnpilot.core.rundir import Recorder
+from vlnpilot.episode.config import EpisodeConfig, JudgeOutcome, LoopControl
+from vlnpilot.episode.loop import run_episode
+from vlnpilot.episode.measures import EpisodeResult
+from vlnpilot.episode.record import StepCallback
 from vlnpilot.pilots.base import Pilot, close_pilot
-from vlnpilot.record import Recorder
-from vlnpilot.tasks import Task
+from vlnpilot.tasks.task import Task
 
 
 def run_recorded_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, *,

@@ -12,22 +12,22 @@ from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
-from vlnpilot.commands import Command
-from vlnpilot.context import context_name
-from vlnpilot.decision import Decision
-from vlnpilot.environment import Environment, capabilities_of
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import Command
+from vlnpilot.core.decision import Decision
+from vlnpilot.core.environment import Environment, capabilities_of
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import Observation, Pose
+from vlnpilot.core.rundir import Recorder, git_sha, package_versions
 from vlnpilot.pilots.base import Pilot
 from vlnpilot.pilots.keyboard import HUMAN
-from vlnpilot.prompting import prompt_hash
-from vlnpilot.record import Recorder, git_sha, package_versions
+from vlnpilot.prompting.context import context_name
+from vlnpilot.prompting.render import prompt_hash
 from vlnpilot.safety import SafetyLayer, SafetyVerdict
-from vlnpilot.tasks import Task
-from vlnpilot.types import Observation, Pose
+from vlnpilot.tasks.task import Task
 
 if TYPE_CHECKING:
-    from vlnpilot.episode import EpisodeConfig
-    from vlnpilot.episode_measures import EpisodeResult
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.measures import EpisodeResult
 
 StepCallback = Callable[[dict[str, Any]], None]
 

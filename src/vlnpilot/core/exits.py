@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from urllib.parse import urlsplit
 
-from vlnpilot.errors import ConfigError
+from vlnpilot.core.errors import ConfigError
 
 OK = 0
 BAD_INPUT = 2

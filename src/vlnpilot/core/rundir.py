@@ -27,8 +27,8 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from vlnpilot.errors import ConfigError
-from vlnpilot.fileio import write_atomic
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fileio import write_atomic
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
 # Everything a run and its report write: what `overwrite` removes, and what marks a directory as holding a run.

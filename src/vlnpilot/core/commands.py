@@ -9,8 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from enum import StrEnum
 
-from vlnpilot.errors import UnknownNameError
-from vlnpilot.types import Motion
+from vlnpilot.core.errors import UnknownNameError
+from vlnpilot.core.records import Motion
 
 
 class Kind(StrEnum):

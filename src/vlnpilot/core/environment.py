@@ -8,14 +8,16 @@ Callers read the declaration (`capabilities_of`, `ground_truth_of`, `depth_sensi
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Protocol, cast, runtime_checkable
+from typing import TYPE_CHECKING, Protocol, cast, runtime_checkable
 
 import numpy as np
 
-from vlnpilot.commands import Command
-from vlnpilot.errors import ConfigError
-from vlnpilot.scene.model import Scene, Spawn
-from vlnpilot.types import GroundTruth, MotionSampling, Observation, Pose
+from vlnpilot.core.commands import Command
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.records import GroundTruth, MotionSampling, Observation, Pose
+
+if TYPE_CHECKING:  # the scene sits above the floor; the protocol only names it
+    from vlnpilot.scene.model import Scene, Spawn
 
 
 @dataclass(frozen=True)

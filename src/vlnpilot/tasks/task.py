@@ -11,12 +11,12 @@ import math
 import re
 from dataclasses import dataclass
 
-from vlnpilot.commands import OPPOSITE, Command, Kind
-from vlnpilot.errors import VLNPilotError
-from vlnpilot.fsm import State
+from vlnpilot.core.commands import OPPOSITE, Command, Kind
+from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.fsm import State
+from vlnpilot.core.records import GroundTruth, Pose
 from vlnpilot.scene.model import Scene, _norm
-from vlnpilot.success import DEFAULT_SUCCESS, SuccessConfig
-from vlnpilot.types import GroundTruth, Pose
+from vlnpilot.tasks.success import DEFAULT_SUCCESS, SuccessConfig
 
 
 class QueryError(VLNPilotError, ValueError):
@@ -49,7 +49,7 @@ def _mentions(text: str, names: tuple[str, ...]) -> int:
 
 def parse_query(query: str, scene: Scene) -> Task:
     """Turn a free-form query into a Task. Unknown rooms or objects raise QueryError listing the known ones."""
-    from vlnpilot.exits import shorten
+    from vlnpilot.core.exits import shorten
     text = _norm(query)
     if not text:
         raise QueryError("the query is empty; try e.g. 'Go to the bedroom' or 'Find the mirror in the bedroom'")

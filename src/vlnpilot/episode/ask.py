@@ -14,19 +14,19 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from vlnpilot.commands import Command
-from vlnpilot.context import ContextConfig, PilotContext, confirmation_note
-from vlnpilot.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
-from vlnpilot.fsm import FINAL_STATES, State, parse_state
+from vlnpilot.core.commands import Command
+from vlnpilot.core.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
+from vlnpilot.core.fsm import FINAL_STATES, State, parse_state
+from vlnpilot.core.records import Observation
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Pilot, PilotError
+from vlnpilot.prompting.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.safety import draw_corridor
-from vlnpilot.tasks import Task
-from vlnpilot.types import Observation
+from vlnpilot.tasks.task import Task
 
 if TYPE_CHECKING:
-    from vlnpilot.episode import EpisodeConfig
+    from vlnpilot.episode.config import EpisodeConfig
 
 
 @dataclass(frozen=True)

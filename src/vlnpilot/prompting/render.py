@@ -1,9 +1,9 @@
-"""Prompts of the paper's "VLLM Module" (Appendices A-C); reading the answer is `vlnpilot.decision`'s job.
+"""Prompts of the paper's "VLLM Module" (Appendices A-C); reading the answer is `vlnpilot.core.decision`'s job.
 
 The prompt has three parts: a system prompt identical for every episode (Appendix A + the output format of
 Appendix C), the episode context (query + topological map), and a per-state prompt (Appendix B) whose
 movement list, next states and valid answer values are rendered from `commands.COMMANDS` and the FSM table,
-so that prompt, JSON schema and validation cannot disagree. The wording lives in `prompts/*.md`.
+so that prompt, JSON schema and validation cannot disagree. The wording lives in `prompting/templates/*.md`.
 """
 
 from __future__ import annotations
@@ -22,11 +22,11 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
-from vlnpilot.commands import COMMANDS, Command, Kind, get_command
-from vlnpilot.decision import DOOR_POSITIONS, FIELDS, PilotInput
-from vlnpilot.errors import ConfigError, UnknownNameError, VLNPilotError
-from vlnpilot.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
-from vlnpilot.success import visual_cue_values
+from vlnpilot.core.commands import COMMANDS, Command, Kind, get_command
+from vlnpilot.core.decision import DOOR_POSITIONS, FIELDS, PilotInput
+from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
+from vlnpilot.core.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
+from vlnpilot.tasks.success import visual_cue_values
 
 __all__ = [
     "Prompt",
@@ -49,12 +49,12 @@ class PromptTemplateError(VLNPilotError):
 
 # --------------------------------------------------------------------------------------------------- templates
 
-_TEMPLATE_DIR = "prompts"
+_TEMPLATE_DIR = "templates"
 
 
 @cache
 def _template(name: str) -> str:
-    path = files("vlnpilot") / _TEMPLATE_DIR / name
+    path = files("vlnpilot.prompting") / _TEMPLATE_DIR / name
     try:
         return path.read_text(encoding="utf-8").strip() + "\n"
     except FileNotFoundError:

@@ -11,8 +11,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from vlnpilot.commands import Command
-from vlnpilot.fsm import State, state_spec
+from vlnpilot.core.commands import Command
+from vlnpilot.core.fsm import State, state_spec
 
 OVERRIDE_REASONS = ("fallback", "shield", "assist", "guard")
 _BY_SOURCE = {"shield": "shield", "door_assist": "assist", "oscillation_guard": "guard"}

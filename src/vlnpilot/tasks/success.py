@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from vlnpilot.commands import COMMANDS
+from vlnpilot.core.commands import COMMANDS
 from vlnpilot.scene.model import target_kind
 
 

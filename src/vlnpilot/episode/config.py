@@ -1,0 +1,73 @@
+"""What an episode is configured with, and how it can end: `EpisodeConfig`, the outcomes, the loop control's `Gate`.
+
+Apart from the loop (`episode.loop`) so that the loop's collaborators (`episode.ask`, `episode.record`) can read the
+configuration without importing the loop that imports them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol
+
+from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.fsm import PROFILES, State
+from vlnpilot.pilots.base import Pilot
+from vlnpilot.prompting.context import ContextConfig, context_preset
+from vlnpilot.safety import OVERLAYS, SHIELDS, SafetyConfig
+from vlnpilot.tasks.task import SuccessConfig, Task
+
+__all__ = ["OUTCOMES", "EpisodeConfig", "Gate", "JudgeOutcome", "LoopControl"]
+
+# halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move)
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "aborted")
+JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
+
+
+@dataclass(frozen=True)
+class EpisodeConfig:
+    max_steps: int = 50
+    profile: str = "paper"
+    max_reasks: int = 2  # re-asks after an invalid or malformed answer, within one step
+    max_failed_steps: int = 3  # consecutive steps without a valid decision before `pilot_error`
+    success: SuccessConfig = field(default_factory=SuccessConfig)
+    seed: int | None = None
+    shield: str = "off"  # off | geometry | depth (the CLI defaults to safety.DEFAULT_SHIELD in the simulator)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)  # margin, door assist, oscillation guard, depth
+    overlay: str | None = None  # None | "corridor": draw the propeller-tip corridor on the image the pilot sees
+    # Wall-clock bound on one step's pilot calls, re-asks and provider retries included, for pilots that wait on
+    # a network (`uses_step_deadline`); when it passes the drone hovers and the step counts an invalid decision.
+    step_deadline_s: float | None = 120.0
+    # What the pilot is told beyond the paper's five inputs (prompting.context): a preset name or a ContextConfig.
+    context: ContextConfig | str = "paper"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "context", context_preset(self.context))
+        if not isinstance(self.max_steps, int) or self.max_steps < 1:
+            raise ConfigError(f"max_steps must be a positive integer, got {self.max_steps!r}")
+        if self.profile not in PROFILES:
+            raise ConfigError(f"unknown FSM profile {self.profile!r}; valid profiles: {', '.join(PROFILES)}")
+        if self.max_reasks < 0:
+            raise ConfigError("max_reasks must be >= 0")
+        if str(self.shield).lower() not in SHIELDS:
+            raise ConfigError(f"unknown shield {self.shield!r}; valid shields: {', '.join(SHIELDS)}")
+        if self.step_deadline_s is not None and not self.step_deadline_s > 0:
+            raise ConfigError(f"step_deadline_s must be positive or None, got {self.step_deadline_s!r}")
+        if self.overlay is not None and self.overlay not in OVERLAYS:
+            raise ConfigError(f"unknown overlay {self.overlay!r}; valid overlays: {', '.join(OVERLAYS)}")
+
+
+@dataclass(frozen=True)
+class Gate:
+    """What a loop control (the live station, vlnpilot.live) says before a step: who flies it, or stop here."""
+
+    pilot: Pilot | None = None  # flies this step instead of the episode's pilot (a person at the keyboard)
+    abort: str | None = None  # the episode ends now, outcome `aborted`, for this reason
+
+
+class LoopControl(Protocol):
+    def before_step(self, step: int) -> Gate:
+        """Called once per step before the pilot is asked; may wait (pause)."""
+
+    def abort_reason(self) -> str | None:
+        """Why the episode must end now (an emergency stop while the pilot thought), checked before executing."""
