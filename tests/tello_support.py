@@ -103,7 +103,7 @@ class ThinkingPilot:
     """Thinks `seconds` on the test clock before each answer, then rotates right 15° in Recognize Room (a slow model
     whose answers are always safe to fly: the tests measure time and the robot's limits, not the route)."""
 
-    name, model, privileged = "thinking", "thinking-1", False
+    name, model = "thinking", "thinking-1"
 
     def __init__(self, clock: ManualClock, seconds: float):
         self.clock, self.seconds = clock, seconds

@@ -11,7 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from vlnpilot.core.commands import COMMANDS, get_command
-from vlnpilot.core.decision import Decision, DecisionError, PilotInput
+from vlnpilot.core.decision import Decision, DecisionError, PilotInput, PilotTraits
 from vlnpilot.core.environment import Capabilities
 from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.fsm import FINAL_STATES, State, parse_state, state_spec
@@ -241,7 +241,7 @@ def test_a_decision_is_validated_once(geo: Simulator, monkeypatch: pytest.Monkey
     assert seen == ["C1", "C1"]
     seen.clear()
     trusted = ScriptedPilot([], default=answer("C1", "Recognize Room"))
-    trusted.validates_decisions = True  # type: ignore[attr-defined]
+    trusted.traits = PilotTraits(validates_decisions=True)  # type: ignore[attr-defined]
     result = run_episode(geo, trusted, query, config, spawn="bedroom")
     assert seen == [] and result.steps == 2 and result.invalid_decisions == 0
 

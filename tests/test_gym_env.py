@@ -113,3 +113,14 @@ def test_bad_options_are_refused():
         gym_env.CabinEnv(width=W, height=H, goal_room="garage")
     with pytest.raises(ConfigError):
         gym_env.CabinEnv(width=W, height=H, render_mode="human")
+
+
+def test_gymnasium_finds_the_ids_from_the_module_named_in_the_id() -> None:
+    """`gym.make("vlnpilot.sim.gym_env:VLNPilot/Cabin-v0")` works in a fresh process, nothing imported first."""
+    import subprocess
+    import sys
+
+    code = ("import gymnasium as gym; e = gym.make('vlnpilot.sim.gym_env:VLNPilot/House-v0', width=32, height=24); "
+            "print(e.spec.id); e.close()")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.strip() == "VLNPilot/House-v0"

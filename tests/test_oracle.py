@@ -92,7 +92,7 @@ def test_oracle_is_deterministic(geo: Simulator) -> None:
 
 def test_oracle_needs_ground_truth(scene) -> None:
     pilot = OraclePilot()
-    assert pilot.privileged and pilot.name == "oracle"
+    assert pilot.traits.privileged and pilot.name == "oracle"
     pin = PilotInput(image=None, query="Go to the bedroom", topological_map=scene.topological_map(),
                      state=State.RECOGNIZE_ROOM, previous_movement=None, step=1)
     with pytest.raises(VLNPilotError, match="attach"):

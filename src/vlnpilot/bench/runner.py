@@ -29,6 +29,7 @@ from vlnpilot.bench.manifest import FORMAT, MANIFEST, BenchManifest, bench_lock,
 from vlnpilot.bench.results import RESULTS, PilotSummary, ResultsLog, episode_key, record_key, summarize
 from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dict
 from vlnpilot.bench.tables import render_tables
+from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.fileio import write_atomic
 from vlnpilot.core.fsm import PROFILES
@@ -151,8 +152,7 @@ def resolve_pilots(specs: Sequence[str], base_url: str | None,
         if d in dirs:
             d += "-" + hashlib.sha256(spec.encode()).hexdigest()[:6]
         dirs.add(d)
-        out.append(PilotEntry(spec, getattr(pilot, "model", None), d, options, bool(getattr(pilot, "privileged",
-                                                                                             False))))
+        out.append(PilotEntry(spec, getattr(pilot, "model", None), d, options, traits_of(pilot).privileged))
     return out
 
 

@@ -289,3 +289,21 @@ def normalize_decision(decision: Decision) -> Decision:
         pass
     return decision.model_copy(update=update)
 
+
+@dataclass(frozen=True)
+class PilotTraits:
+    """What a pilot declares about itself (its class's `traits`), as an environment declares its `Capabilities`:
+    what it does not declare, it does not get."""
+
+    privileged: bool = False  # flies on ground truth (the oracle): `attach(gt)` first; refused where there is none
+    validates_decisions: bool = False  # returns decisions already normalised and allowed in the state: checked once
+    uses_step_deadline: bool = False  # waits on a network: the episode bounds each step (EpisodeConfig.step_deadline_s)
+
+
+NO_TRAITS = PilotTraits()
+
+
+def traits_of(pilot: object) -> PilotTraits:
+    """A pilot's declared traits; `NO_TRAITS` if it declares none (a pilot written to the bare protocol)."""
+    declared = getattr(pilot, "traits", None)
+    return declared if isinstance(declared, PilotTraits) else NO_TRAITS

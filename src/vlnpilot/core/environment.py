@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Protocol, cast, runtime_checkable
 import numpy as np
 
 from vlnpilot.core.commands import Command
+from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.records import GroundTruth, MotionSampling, Observation, Pose
 
@@ -107,6 +108,6 @@ def check_capabilities(caps: Capabilities, robot: str, *, shield: str, pilot: ob
     if key == "depth" and not caps.depth:
         raise ConfigError(f"--shield depth needs a front depth image, which the {robot} does not have (one RGB "
                           f"camera); valid shields here: {usable}")
-    if getattr(pilot, "privileged", False) and not caps.ground_truth:
+    if traits_of(pilot).privileged and not caps.ground_truth:
         raise ConfigError(f"pilot {getattr(pilot, 'name', pilot)!r} flies on ground truth, which the {robot} does not "
                           "have; use a model pilot (openai, gemini, anthropic, remote, stdin or replay)")

@@ -15,12 +15,20 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from vlnpilot.core.commands import Command
-from vlnpilot.core.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
+from vlnpilot.core.decision import (
+    Decision,
+    DecisionError,
+    PilotInput,
+    Usage,
+    normalize_decision,
+    traits_of,
+    validate_decision,
+)
 from vlnpilot.core.fsm import FINAL_STATES, State, parse_state
 from vlnpilot.core.records import Observation
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
-from vlnpilot.pilots.base import Pilot, PilotError
+from vlnpilot.pilots.base import Pilot, PilotError, as_base_pilot
 from vlnpilot.prompting.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.safety import draw_corridor
 from vlnpilot.tasks.task import Task
@@ -50,7 +58,7 @@ def ask_once(pilot: Pilot, pin: PilotInput, state: State, profile: str) -> Answe
                       getattr(exc, "raw_text", None), exc.reason, getattr(exc, "feedback", None))
     except DecisionError as exc:
         return Answer(None, f"malformed answer: {exc}", raw_text=exc.raw_text, kind="malformed")
-    if getattr(pilot, "validates_decisions", False):  # a model pilot checked it against this very state: once
+    if traits_of(pilot).validates_decisions:  # a model pilot checked it against this very state: once
         return Answer(decision, usage=decision.usage, raw_text=decision.raw_text)
     decision = normalize_decision(decision)
     error = validate_decision(decision, state, profile)
@@ -68,7 +76,7 @@ class Deadline:
 
     def __init__(self, seconds: float | None, pilot: Pilot | None = None):
         self.seconds = seconds
-        self._pilot = pilot
+        self._pilot = as_base_pilot(pilot) if pilot is not None else None
 
     def ask(self, pilot: Pilot, pin: PilotInput, state: State, profile: str, remaining_s: float) -> Answer:
         if self.seconds is None:
@@ -82,9 +90,8 @@ class Deadline:
         return answer
 
     def _cancel(self) -> None:
-        cancel = getattr(self._pilot, "cancel_pending", None)
-        if callable(cancel):
-            cancel()
+        if self._pilot is not None:
+            self._pilot.cancel_pending()
 
     def expired(self) -> Answer:
         return Answer(None, f"step_deadline: no valid answer within the step deadline of {self.seconds:g} s",
@@ -121,7 +128,7 @@ class PilotAsker:
 
     def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any):
         self.pilot, self.task, self.config, self.topo = pilot, task, config, topological_map
-        bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
+        bounded = traits_of(pilot).uses_step_deadline  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
         self.context = PilotContext(config.context, config.max_steps)
         self.previous: str | None = None  # the movement executed last step

@@ -32,7 +32,7 @@ from vlnpilot.episode.config import EpisodeConfig, Gate, JudgeOutcome, LoopContr
 from vlnpilot.episode.measures import EpisodeEnd, EpisodeResult, EpisodeStart, Measures, StepFacts, result_type
 from vlnpilot.episode.overrides import override_reason
 from vlnpilot.episode.record import EpisodeRecording, StepCallback, StepRecord
-from vlnpilot.pilots.base import Pilot
+from vlnpilot.pilots.base import BasePilot, Pilot, as_base_pilot
 from vlnpilot.safety import SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks.task import Task, judge
@@ -42,7 +42,7 @@ __all__ = ["run_episode"]
 
 def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
     gt = ground_truth_of(env)  # only if the environment declares it (a real drone does not)
-    if getattr(pilot, "privileged", False):
+    if pilot.traits.privileged:
         if gt is None:
             raise ConfigError(f"pilot {pilot.name!r} needs ground truth, which this environment does not declare; "
                               "use a model pilot")
@@ -50,9 +50,9 @@ def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
     return gt
 
 
-def _reseed(pilot: Pilot, seed: int | None) -> None:
-    """Give a stochastic pilot the episode's seed (pilots with a `reseed(seed)` method, e.g. noisy-oracle)."""
-    if seed is not None and callable(getattr(pilot, "reseed", None)):
+def _reseed(pilot: BasePilot, seed: int | None) -> None:
+    """Give a stochastic pilot (noisy-oracle) the episode's seed."""
+    if seed is not None:
         pilot.reseed(seed)
 
 
@@ -81,6 +81,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given. Without ground
     truth (a real robot) a final state is a success as declared, unless `judge_outcome` (the operator) rules."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
+    pilot = as_base_pilot(pilot)  # its traits and hooks, declared (a bare-protocol pilot is adapted once, here)
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
     safety, measures, recording, asker = _start(env, pilot, task, config, obs, recorder, on_step, spawn, pilot_spec)
@@ -211,15 +212,11 @@ def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measure
                          wall_time_s=round(time.perf_counter() - t_start, 3), **measured)
 
 
-def _tell_pilot_the_episode(pilot: Pilot, scene: Any, config: EpisodeConfig) -> None:
-    """A pilot with an `episode_started(scene, config)` method sees them first (the replay pilot checks them)."""
-    started = getattr(pilot, "episode_started", None)
-    if callable(started):
-        started(scene, config)
+def _tell_pilot_the_episode(pilot: BasePilot, scene: Any, config: EpisodeConfig) -> None:
+    """The pilot sees the scene and the configuration first (the replay pilot checks them)."""
+    pilot.episode_started(scene, config)
 
 
-def _tell_pilot_the_outcome(pilot: Pilot, result: EpisodeResult) -> None:
-    """A pilot with an `episode_finished(result)` method learns the outcome (the files pilot writes done.txt)."""
-    finished = getattr(pilot, "episode_finished", None)
-    if callable(finished):
-        finished(result)
+def _tell_pilot_the_outcome(pilot: BasePilot, result: EpisodeResult) -> None:
+    """The pilot learns the outcome (the files pilot writes done.txt)."""
+    pilot.episode_finished(result)

@@ -27,6 +27,7 @@ from vlnpilot.core.decision import (
     Decision,
     DecisionError,
     PilotInput,
+    PilotTraits,
     Usage,
     normalize_decision,
     parse_decision,
@@ -34,7 +35,7 @@ from vlnpilot.core.decision import (
 )
 from vlnpilot.pilots import pricing
 from vlnpilot.pilots._gate import CallGate
-from vlnpilot.pilots.base import PilotError
+from vlnpilot.pilots.base import BasePilot, PilotError
 from vlnpilot.pilots.options import ModelOptions
 
 log = logging.getLogger(__name__)
@@ -282,14 +283,12 @@ def _int(value: Any) -> int:
         return 0
 
 
-class ModelPilot:
+class ModelPilot(BasePilot):
     """Base of the SDK pilots: options, the decide() skeleton, reply checks, usage and cost.
 
     Subclasses set the class attributes and implement `_call(prompt) -> Reply`, raising PilotError
     on transport/HTTP failures (after the SDK's or our retries).
     """
-
-    uses_step_deadline = True  # waits on a network: the controller bounds each step (EpisodeConfig.step_deadline_s)
 
     name: ClassVar[str]
     provider: ClassVar[str]
@@ -317,9 +316,9 @@ class ModelPilot:
                         self.provider, self.model, pricing.PRICES_AS_OF)
 
     @property
-    def validates_decisions(self) -> bool:
-        """Whether its decisions come back normalised and checked against the FSM (the episode then trusts them)."""
-        return self.validate
+    def traits(self) -> PilotTraits:  # type: ignore[override]
+        """It waits on a network; its decisions come back checked against the FSM unless `validate_replies` is off."""
+        return PilotTraits(validates_decisions=self.validate, uses_step_deadline=True)
 
     def __repr__(self) -> str:  # never the key: the SDK client holds it, not us
         return f"{type(self).__name__}(model={self.model!r}, timeout={self.timeout:g})"

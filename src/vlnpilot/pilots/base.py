@@ -6,8 +6,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
-from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.decision import NO_TRAITS, Decision, PilotInput, PilotTraits, traits_of
 from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.records import GroundTruth
 from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 
@@ -23,16 +24,70 @@ class PilotError(VLNPilotError):
 
 @runtime_checkable
 class Pilot(Protocol):
-    """Anything that turns a PilotInput into a Decision. `privileged` pilots get ground truth.
-
-    A pilot whose `validates_decisions` is true returns decisions already normalised and allowed in
-    `pilot_input.state` (ModelPilot does, with `decision.validate_decision`); the episode checks every other's.
-    """
+    """Anything that turns a PilotInput into a Decision. The least a pilot is; `BasePilot` adds its traits and
+    the hooks the episode calls, as no-ops (a pilot written to this bare protocol is adapted by `as_base_pilot`)."""
 
     name: str
     model: str | None
 
     def decide(self, pilot_input: PilotInput) -> Decision: ...
+
+
+class BasePilot:
+    """A pilot with its traits declared and every hook the episode calls, each a no-op until overridden.
+
+    `traits` (`core.decision.PilotTraits`) says what the pilot is: privileged (reads ground truth), whether it
+    validates its own decisions, whether it waits on a network. The hooks, in the order an episode calls them:
+    `attach(gt)` (privileged pilots only), `reseed(seed)`, `episode_started(scene, config)`, then `decide` each
+    step (`cancel_pending()` when a step's deadline passes), `episode_finished(result)`, and `close()`.
+    """
+
+    name: str = "pilot"
+    model: str | None = None
+    traits: PilotTraits = NO_TRAITS
+
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        raise NotImplementedError
+
+    def attach(self, ground_truth: GroundTruth) -> None:
+        """Receive ground truth before the episode (only a pilot whose traits say `privileged`)."""
+
+    def reseed(self, seed: int) -> None:
+        """Take the episode's seed (a stochastic pilot)."""
+
+    def episode_started(self, scene: Any, config: Any) -> None:
+        """See the scene and the episode's configuration first (the replay pilot checks them)."""
+
+    def episode_finished(self, result: Any) -> None:
+        """Learn the outcome (the files pilot writes done.txt)."""
+
+    def cancel_pending(self) -> None:
+        """Abandon a call still under way: the step's deadline passed."""
+
+    def close(self) -> None:
+        """Release what the pilot holds (an SDK client's sockets, a server connection)."""
+
+
+class _ProtocolPilot(BasePilot):
+    """A pilot written to the bare `Pilot` protocol, given the base class's traits and hooks: it declares no traits,
+    and of the hooks it keeps the ones it defines."""
+
+    def __init__(self, pilot: Pilot):
+        self._pilot = pilot
+        self.name, self.model = pilot.name, getattr(pilot, "model", None)
+        self.traits = traits_of(pilot)
+        for hook in ("attach", "reseed", "episode_started", "episode_finished", "cancel_pending", "close"):
+            own = getattr(pilot, hook, None)
+            if callable(own):
+                setattr(self, hook, own)
+
+    def decide(self, pilot_input: PilotInput) -> Decision:
+        return self._pilot.decide(pilot_input)
+
+
+def as_base_pilot(pilot: Pilot) -> BasePilot:
+    """The pilot itself if it is a `BasePilot`, else the pilot adapted to one (its hooks found once, here)."""
+    return pilot if isinstance(pilot, BasePilot) else _ProtocolPilot(pilot)
 
 
 PilotFactory = Callable[..., Pilot]
@@ -106,8 +161,6 @@ def make_pilot(spec: str, **options: Any) -> Pilot:
     return entry.factory(**entry.options.build(name, **options).given())
 
 
-def close_pilot(pilot: object) -> None:
-    """Release what a pilot holds (an SDK client's sockets, a server connection), if it has a `close()`."""
-    close = getattr(pilot, "close", None)
-    if callable(close):
-        close()
+def close_pilot(pilot: Pilot) -> None:
+    """Release what a pilot holds (an SDK client's sockets, a server connection)."""
+    as_base_pilot(pilot).close()

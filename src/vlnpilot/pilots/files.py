@@ -41,7 +41,7 @@ from pydantic import Field
 from vlnpilot.core.decision import FIELDS, Decision, PilotInput, Usage, parse_decision
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fileio import write_atomic
-from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting.render import build_prompt
 
@@ -98,7 +98,7 @@ class FilesOptions(PilotOptions):
 
 
 @register_pilot("files", options=FilesOptions)
-class FilesPilot:
+class FilesPilot(BasePilot):
     """Writes each call's prompt and image into a directory and waits for the answer file.
 
     Options (`FilesOptions`): `directory` (or the SPEC `files:DIR`), `timeout_s` (wait per call, default 600 s;

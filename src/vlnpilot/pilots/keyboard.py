@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Protocol
 
 from vlnpilot.core.decision import Decision, PilotInput
-from vlnpilot.pilots.base import Pilot
+from vlnpilot.pilots.base import BasePilot, Pilot
 
 HUMAN = "human"  # the `model` of a decision a person made
 
@@ -19,7 +19,7 @@ class CommandSource(Protocol):
         """The person's next decision for this step, or None when they handed control back while it waited."""
 
 
-class KeyboardPilot:
+class KeyboardPilot(BasePilot):
     """Flies what the person types; hands the step to `pilot` (the model) when control is handed back mid-wait."""
 
     name = HUMAN

@@ -15,12 +15,12 @@ from typing import Any, ClassVar
 from pydantic import Field
 
 from vlnpilot.core.commands import COMMANDS, Kind
-from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.decision import Decision, PilotInput, PilotTraits
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.fsm import State, state_spec
 from vlnpilot.core.records import GroundTruth, Pose, wrap_deg
 from vlnpilot.core.tello_spec import horizontal_fov_deg
-from vlnpilot.pilots.base import register_pilot
+from vlnpilot.pilots.base import BasePilot, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.scene.model import Door
 from vlnpilot.tasks.task import SuccessConfig, Task, parse_query
@@ -66,11 +66,11 @@ class OracleOptions(PilotOptions):
 
 
 @register_pilot("oracle", options=OracleOptions)
-class OraclePilot:
+class OraclePilot(BasePilot):
     """Privileged pilot: `attach(ground_truth)` before the first `decide`."""
 
     name = "oracle"
-    privileged: ClassVar[bool] = True
+    traits = PilotTraits(privileged=True)
 
     def __init__(self, model: str | None = None, **options: Any):
         self._configure(OracleOptions.build(self.name, model=model, **options))

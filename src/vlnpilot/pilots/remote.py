@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import httpx
 from pydantic import Field, SecretStr
 
-from vlnpilot.core.decision import Decision, PilotInput, Usage
+from vlnpilot.core.decision import Decision, PilotInput, PilotTraits, Usage
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots._common import (
     REPLY_REASONS,
@@ -30,7 +30,7 @@ from vlnpilot.pilots._common import (
     timeout_error,
 )
 from vlnpilot.pilots._gate import CallCancelled, CallGate
-from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions, secret_value
 
 URL_ENV = "VLN_PILOT_URL"
@@ -62,7 +62,7 @@ class RemoteOptions(PilotOptions):
 
 
 @register_pilot("remote", options=RemoteOptions)
-class RemotePilot:
+class RemotePilot(BasePilot):
     """A pilot that lives on a pilot server.
 
     Options (`RemoteOptions`): model (the server-side pilot SPEC, e.g. "openai:gpt-4.1"; default: the server's),
@@ -71,7 +71,7 @@ class RemotePilot:
     jpeg_quality, max_side, transport (an httpx transport, for tests).
     """
 
-    uses_step_deadline = True  # waits on a network: the controller bounds each step (EpisodeConfig.step_deadline_s)
+    traits = PilotTraits(uses_step_deadline=True)  # waits on a network: the controller bounds each step
 
     name = "remote"
 

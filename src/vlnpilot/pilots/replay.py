@@ -15,7 +15,7 @@ from typing import Any
 from vlnpilot.core.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.rundir import load_run, load_trial
-from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting.context import context_name
 
@@ -33,7 +33,7 @@ class ReplayOptions(PilotOptions):
 
 
 @register_pilot("replay", options=ReplayOptions)
-class ReplayPilot:
+class ReplayPilot(BasePilot):
     """Replays `run_dir`'s episode.jsonl (`make_pilot("replay:RUN_DIR")` or `make_pilot("replay", run_dir=...)`).
 
     `strict=True` also ends the episode (fatal PilotError) as soon as the controller's state differs from the

@@ -23,7 +23,7 @@ from pydantic import Field
 
 from vlnpilot.core.decision import Decision, PilotInput, Usage, parse_decision
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting.render import build_prompt
 
@@ -44,7 +44,7 @@ class StdinOptions(PilotOptions):
 
 
 @register_pilot("stdin", options=StdinOptions)
-class StdinPilot:
+class StdinPilot(BasePilot):
     """Prompts on `output` (default standard error), reads one JSON line per answer from `input` (default stdin).
 
     Options (`StdinOptions`): `image_dir` (where front images go; default a fresh temporary directory),

@@ -12,6 +12,7 @@ from collections import OrderedDict
 from collections.abc import Callable, Iterable
 from typing import Any
 
+from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.pilots.base import Pilot, close_pilot, parse_spec, pilot_factory, pilot_options_class
 
@@ -36,7 +37,7 @@ def refuse_privileged(specs: Iterable[str]) -> None:
             factory = pilot_factory(parse_spec(spec)[0])
         except UnknownNameError:
             continue  # a custom factory's name: it is checked when it is built
-        if getattr(factory, "privileged", False):
+        if traits_of(factory).privileged:
             raise ConfigError(f"pilot {spec!r} needs the simulator's ground truth, which a server does not have; "
                               "serve a model pilot, e.g. --pilot openai:gpt-4.1")
 
