@@ -19,6 +19,7 @@ from vlnpilot.core.environment import (
     Capabilities,
     DepthSensing,
     Environment,
+    GroundTruth,
     GroundTruthSource,
     capabilities_of,
     check_capabilities,
@@ -27,7 +28,7 @@ from vlnpilot.core.environment import (
 )
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fsm import State
-from vlnpilot.core.records import GroundTruth, Motion, Observation, Pose
+from vlnpilot.core.records import Motion, Observation, Pose
 from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.oracle import OraclePilot

@@ -9,8 +9,8 @@ import pytest
 from PIL import Image
 
 from vlnpilot.core.decision import Decision, PilotInput
+from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.core.records import GroundTruth
 from vlnpilot.core.rundir import EPISODE, FRAMES, SUMMARY, Recorder, check_writable, default_run_dir, load_run
 from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode

@@ -7,8 +7,9 @@ import math
 import pytest
 
 from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.fsm import State
-from vlnpilot.core.records import GroundTruth, Motion, Pose
+from vlnpilot.core.records import Motion, Pose
 from vlnpilot.scene import Scene
 from vlnpilot.tasks.task import (
     Oscillations,

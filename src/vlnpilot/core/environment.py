@@ -15,10 +15,35 @@ import numpy as np
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.core.records import GroundTruth, MotionSampling, Observation, Pose
+from vlnpilot.core.records import MotionSampling, Observation, Pose
 
 if TYPE_CHECKING:  # the scene sits above the floor; the protocol only names it
     from vlnpilot.scene.model import Scene, Spawn
+
+
+@runtime_checkable
+class GroundTruth(MotionSampling, Protocol):
+    """Privileged facts about the world, for monitors and privileged pilots only (never model pilots).
+
+    `clearance_at` and `substeps` are the collision geometry that the geometry shield queries."""
+
+    @property
+    def scene(self) -> Scene: ...
+
+    def pose(self) -> Pose: ...
+
+    def room(self) -> str | None:
+        """Id of the room the drone is in, or None (inside a wall or doorway)."""
+
+    def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
+        """Horizontal distance (m) from the drone to the target, and its bearing (deg, + = left of heading)."""
+
+    def target_visible(self, target_id: str) -> bool:
+        """Whether the target occupies enough pixels of the front camera (segmentation render)."""
+
+    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
+        """(distance, scene part, drone part) of the nearest geometry within `max_distance` of the drone at
+        `pose` (negative when penetrating), else None."""
 
 
 @dataclass(frozen=True)

@@ -4,12 +4,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
+from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
-
-if TYPE_CHECKING:
-    from vlnpilot.scene.model import Scene
 
 
 @dataclass(frozen=True)
@@ -97,28 +94,3 @@ class MotionSampling(Protocol):
 
     def substeps(self, motion: Motion) -> int:
         """At how many evenly spaced poses (at i/n, i = 1..n) a motion is checked; 1: only where it ends."""
-
-
-@runtime_checkable
-class GroundTruth(MotionSampling, Protocol):
-    """Privileged facts about the world, for monitors and privileged pilots only (never model pilots).
-
-    `clearance_at` and `substeps` are the collision geometry that the geometry shield queries."""
-
-    @property
-    def scene(self) -> Scene: ...
-
-    def pose(self) -> Pose: ...
-
-    def room(self) -> str | None:
-        """Id of the room the drone is in, or None (inside a wall or doorway)."""
-
-    def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
-        """Horizontal distance (m) from the drone to the target, and its bearing (deg, + = left of heading)."""
-
-    def target_visible(self, target_id: str) -> bool:
-        """Whether the target occupies enough pixels of the front camera (segmentation render)."""
-
-    def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
-        """(distance, scene part, drone part) of the nearest geometry within `max_distance` of the drone at
-        `pose` (negative when penetrating), else None."""

@@ -22,10 +22,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from vlnpilot.core.commands import HOVER, Command, get_command
-from vlnpilot.core.environment import Environment, ground_truth_of
+from vlnpilot.core.environment import Environment, GroundTruth, ground_truth_of
 from vlnpilot.core.errors import ConfigError, RobotHalt
 from vlnpilot.core.fsm import FINAL_STATES, State, parse_state
-from vlnpilot.core.records import GroundTruth, Observation, Pose
+from vlnpilot.core.records import Observation, Pose
 from vlnpilot.core.rundir import Recorder
 from vlnpilot.episode.ask import PilotAsker, StepAnswer
 from vlnpilot.episode.config import EpisodeConfig, Gate, JudgeOutcome, LoopControl

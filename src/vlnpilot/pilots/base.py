@@ -7,8 +7,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 from vlnpilot.core.decision import NO_TRAITS, Decision, PilotInput, PilotTraits, traits_of
+from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import VLNPilotError
-from vlnpilot.core.records import GroundTruth
 from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 

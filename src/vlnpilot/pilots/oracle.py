@@ -16,9 +16,10 @@ from pydantic import Field
 
 from vlnpilot.core.commands import COMMANDS, Kind
 from vlnpilot.core.decision import Decision, PilotInput, PilotTraits
+from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.fsm import State, state_spec
-from vlnpilot.core.records import GroundTruth, Pose, wrap_deg
+from vlnpilot.core.records import Pose, wrap_deg
 from vlnpilot.core.tello_spec import horizontal_fov_deg
 from vlnpilot.pilots.base import BasePilot, register_pilot
 from vlnpilot.pilots.options import PilotOptions

@@ -14,9 +14,12 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from vlnpilot.core.commands import Command, get_command  # noqa: E402
-from vlnpilot.core.environment import Capabilities  # noqa: E402
+from vlnpilot.core.environment import (
+    Capabilities,  # noqa: E402
+    GroundTruth,
+)
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
-from vlnpilot.core.records import GroundTruth, Motion, Observation, Pose  # noqa: E402
+from vlnpilot.core.records import Motion, Observation, Pose  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import (

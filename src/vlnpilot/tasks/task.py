@@ -12,9 +12,10 @@ import re
 from dataclasses import dataclass
 
 from vlnpilot.core.commands import OPPOSITE, Command, Kind
+from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.fsm import State
-from vlnpilot.core.records import GroundTruth, Pose
+from vlnpilot.core.records import Pose
 from vlnpilot.scene.model import Scene, _norm
 from vlnpilot.tasks.success import DEFAULT_SUCCESS, SuccessConfig
 
