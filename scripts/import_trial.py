@@ -1,7 +1,11 @@
 """Add a recorded real-VLM episode to a set of trials under trials/, and rewrite the set's suite.yaml.
 
     python scripts/import_trial.py RUN_DIR trials/after-plus living-bathroom-1 \
-        --flown-by "..." --interface stdin [--scene cabin-v1] [--account report.md]
+        --flown-by "..." --interface stdin --pilot-memory conversation [--scene cabin-v1] [--account report.md]
+
+`--pilot-memory` says what the pilot remembered: `conversation` (one pilot saw the whole episode), `none` (a fresh
+pilot per step, e.g. through the files pilot: docs/pilot-memory.md) or `history=N` (a model pilot's `history` option;
+a run's summary.json records it, and it is the default then).
 
 Copies the run's summary.json and episode.jsonl (not the frames: the simulator is deterministic, and a replay
 regenerates them), writes trial.json (who flew it, when, through which interface, the scene and prompt versions)
@@ -13,7 +17,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import shutil
+import sys
 from pathlib import Path
 
 import yaml
@@ -21,10 +27,23 @@ import yaml
 from vlnpilot.core.rundir import load_run
 from vlnpilot.scene import load_scene
 
+PILOT_MEMORY = re.compile(r"conversation|none|history=[1-9]\d*(,images=\d+)?")
+
+
+def pilot_memory(given: str | None, summary: dict) -> str:
+    """The trial's pilot memory: as given, else as the run recorded it; one line and exit 2 when neither is valid."""
+    memory = given if given is not None else summary.get("pilot_memory")
+    if memory is None or not PILOT_MEMORY.fullmatch(memory):
+        problem = "the run does not record it" if memory is None else f"got {memory!r}"
+        print(f"--pilot-memory is needed ({problem}): conversation, none or history=N", file=sys.stderr)
+        raise SystemExit(2)
+    return memory
+
 
 def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, interface: str, scene: str | None,
-                 account: Path | None) -> Path:
+                 account: Path | None, memory: str | None = None) -> Path:
     summary, _ = load_run(run_dir)
+    memory = pilot_memory(memory, summary)
     dest = set_dir / row
     dest.mkdir(parents=True, exist_ok=False)
     for name in ("summary.json", "episode.jsonl"):
@@ -33,6 +52,7 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
     trial = {
         "flown_by": flown_by,
         "interface": interface,
+        "pilot_memory": memory,
         "started_at": summary["provenance"]["started_at"],
         "scene": scene_name,
         "scene_fingerprint": load_scene(scene_name).fingerprint(),
@@ -85,11 +105,12 @@ def main() -> None:
     parser.add_argument("row")
     parser.add_argument("--flown-by", required=True, help="the model, as it names itself")
     parser.add_argument("--interface", required=True, choices=["stdin", "files"])
+    parser.add_argument("--pilot-memory", help="conversation, none or history=N (default: as the run records it)")
     parser.add_argument("--scene", help="the scene's current name, if it was renamed since the trial was flown")
     parser.add_argument("--account", type=Path, help="the pilot's own account of the episode (markdown)")
     args = parser.parse_args()
     dest = import_trial(args.run_dir, args.set_dir, args.row, flown_by=args.flown_by, interface=args.interface,
-                        scene=args.scene, account=args.account)
+                        scene=args.scene, account=args.account, memory=args.pilot_memory)
     print(f"wrote {dest}")
 
 

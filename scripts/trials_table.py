@@ -37,8 +37,8 @@ def load(root: Path) -> dict[str, list[dict]]:
 
 
 def summary_table(sets: dict[str, list[dict]]) -> str:
-    lines = ["| trials | context | scene | episodes | success (95% CI) | false success | collisions | "
-             "steps exceeded | mean steps |", "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| trials | context | pilot memory | scene | episodes | success (95% CI) | false success | collisions | "
+             "steps exceeded | mean steps |", "|---|---|---|---|---|---|---|---|---|---|"]
     for name in sorted(sets, key=_order):
         trials = sets[name]
         n = len(trials)
@@ -47,7 +47,8 @@ def summary_table(sets: dict[str, list[dict]]) -> str:
         mean = sum(t["steps"] for t in trials) / n
         scenes = sorted({t["scene"] for t in trials})
         scene = scenes[0] if len(scenes) == 1 else ", ".join(scenes)
-        lines.append(f"| {LABELS.get(name, name)} | {trials[0]['context']} | {scene} | {n} | "
+        memory = ", ".join(sorted({t["pilot_memory"] for t in trials}))  # conversation, none, history=N
+        lines.append(f"| {LABELS.get(name, name)} | {trials[0]['context']} | {memory} | {scene} | {n} | "
                      f"{count['success']}/{n} = {count['success'] / n:.0%} ({lo:.0%}-{hi:.0%}) | "
                      f"{count['false_success']} | {count['collision']} | {count['max_steps']} | {mean:.1f} |")
     return "\n".join(lines)

@@ -58,10 +58,10 @@ Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; 
 
 ## Summary per pilot
 
-| Pilot | Model | Success | 95% CI (Wilson) | SPL | Mean steps | Collisions | Steps exceeded | False successes | Pilot errors | Invalid decisions | Oscillations | Interventions | Tokens in/out | Cost (USD) | Latency p50 (s) | Latency p95 (s) |
-| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |
-| oracle | ground-truth | 6/6 (100.0%) | 61.0-100.0% | 0.900 | 20.3 | 0 | 0 | 0 | 0 | 0 | 0 | 0 | 0/0 | 0.0000 | 0.002 | 0.002 |
-| openai:gpt-4.1 | gpt-4.1-2025-04-14 | 2/5 (40.0%) | 11.8-76.9% | 0.250 | 12.8 | 1 | 1 | 1 | 0 | 1 | 3 | 2 | 5000/500 | 0.0500 | 1.900 | 2.825 |
+| Pilot | Model | Success | 95% CI (Wilson) | SPL | Mean steps | Collisions | Steps exceeded | False successes | Pilot errors | Invalid decisions | Oscillations | Interventions | Tokens in/out | Tokens in/call | Cost (USD) | Latency p50 (s) | Latency p95 (s) |
+| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |
+| oracle | ground-truth | 6/6 (100.0%) | 61.0-100.0% | 0.900 | 20.3 | 0 | 0 | 0 | 0 | 0 | 0 | 0 | 0/0 | 0 | 0.0000 | 0.002 | 0.002 |
+| openai:gpt-4.1 | gpt-4.1-2025-04-14 | 2/5 (40.0%) | 11.8-76.9% | 0.250 | 12.8 | 1 | 1 | 1 | 0 | 1 | 3 | 2 | 5000/500 | 625 | 0.0500 | 1.900 | 2.825 |
 
 SPL: mean over episodes of success weighted by path length; latency: per pilot call.
 

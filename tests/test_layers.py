@@ -130,15 +130,15 @@ def test_the_walker_sees_function_imports_and_skips_type_checking(tmp_path: Path
                                                                      monkeypatch: pytest.MonkeyPatch) -> None:
     fake = tmp_path / "src" / "vlnpilot"
     (fake / "sub").mkdir(parents=True)
-    for name in ("__init__.py", "fsm.py", "sub/__init__.py", "sub/x.py", "errors.py", "tc.py"):
+    for name in ("__init__.py", "floor.py", "sub/__init__.py", "sub/x.py", "ground.py", "tc.py"):
         (fake / name).write_text("")
     (fake / "sub" / "y.py").write_text(
-        "from typing import TYPE_CHECKING\nfrom . import x\nfrom vlnpilot import fsm\n"
+        "from typing import TYPE_CHECKING\nfrom . import x\nfrom vlnpilot import floor\n"
         "if TYPE_CHECKING:\n    from vlnpilot.tc import T\n"
-        "def f():\n    from vlnpilot.fsm import State\n    import vlnpilot.errors\n")
+        "def f():\n    from vlnpilot.floor import State\n    import vlnpilot.ground\n")
     monkeypatch.setattr(sys.modules[__name__], "PACKAGE", fake)
-    assert imports(fake / "sub" / "y.py") == {"vlnpilot.sub.x", "vlnpilot.fsm", "vlnpilot.errors"}
-    assert unit_of("vlnpilot.sub.x") == "sub/" and unit_of("vlnpilot.fsm") == "fsm"
+    assert imports(fake / "sub" / "y.py") == {"vlnpilot.sub.x", "vlnpilot.floor", "vlnpilot.ground"}
+    assert unit_of("vlnpilot.sub.x") == "sub/" and unit_of("vlnpilot.floor") == "floor"
 
 
 TOP_LEVEL_MODULES = {"__init__", "__main__", "cli"}

@@ -23,6 +23,7 @@ from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.files import FilesPilot
 from vlnpilot.pilots.oracle import OraclePilot
+from vlnpilot.prompting.context import Travel, in_state_text
 from vlnpilot.prompting.render import build_prompt, system_prompt
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.task import parse_query
@@ -125,9 +126,11 @@ def test_a_whole_episode_flies_through_the_files_answered_by_a_scripted_oracle(s
 
     prompts = [(directory / f"{c}.prompt.md").read_text() for c in calls]
     first_input = PilotInput(image=first_image, query=QUERY, topological_map=sim.scene.topological_map(),
-                             state=State.RECOGNIZE_ROOM, previous_movement=None, step=1)
+                             state=State.RECOGNIZE_ROOM, previous_movement=None, step=1,
+                             in_state=in_state_text((), Travel()))
     assert prompts[0].startswith(build_prompt(first_input).user_text().rstrip())
-    assert [("system.md" in p) for p in prompts] == [True] + [False] * (len(prompts) - 1)
+    assert [("first prompt of the episode" in p) for p in prompts] == [True] + [False] * (len(prompts) - 1)
+    assert all("`system.md`" in p for p in prompts)  # a fresh pilot per call finds the system prompt
     assert all(f"`{c}.answer.json`" in p and f"`{c}.png`" in p for c, p in zip(calls, prompts, strict=True))
     # the invalid answer (001) and the malformed one (002) were re-asked within step 1, with the reasons
     assert [f["kind"] for f in records[0]["failures"]] == ["invalid_decision", "malformed"]
@@ -206,7 +209,7 @@ def test_a_reask_is_a_new_call_and_a_new_episode_rewrites_the_system_prompt(tmp_
     answer("006", ANSWER)
     pilot.decide(pin(step=1))  # steps restart (a caller that does not report the end): a new episode
     assert "Your previous answer was rejected: no" in (tmp_path / "002.prompt.md").read_text()
-    firsts = ["system.md" in (tmp_path / f"00{n}.prompt.md").read_text() for n in range(1, 7)]
+    firsts = ["first prompt of the episode" in (tmp_path / f"00{n}.prompt.md").read_text() for n in range(1, 7)]
     assert firsts == [True, False, False, True, False, True]
     assert (tmp_path / "system.md").exists() and not (tmp_path / "done.txt").exists()
     assert (tmp_path / "latest.txt").read_text() == "006\n"
@@ -298,3 +301,20 @@ def test_the_answer_script_times_out_cleanly(tmp_path: Path) -> None:
     assert done.returncode == 1 and done.stdout == ""
     assert done.stderr.strip() == f"no new prompt (008.prompt.md) nor done.txt in {tmp_path} within 0 s"
     assert json.loads((tmp_path / "007.answer.json").read_text()) == {}
+
+
+def test_a_stateless_pilot_answers_one_call_and_stops(tmp_path: Path) -> None:
+    """`--no-wait`: a fresh pilot per call writes its answer and is done; `files-wait.sh` finds the next call."""
+    pilot = FilesPilot(directory=tmp_path, poll_s=0.002, timeout_s=60)
+    decisions: list = []
+    flier = threading.Thread(target=lambda: decisions.append(pilot.decide(pin(step=1))), daemon=True)
+    flier.start()
+    waited = subprocess.run([str(REPO / "scripts" / "files-wait.sh"), str(tmp_path), "001"], capture_output=True,
+                            text=True, timeout=60)
+    assert waited.returncode == 0 and waited.stdout.startswith(f"{tmp_path}/001.prompt.md\n## User query")
+    answered = subprocess.run([str(REPO / "scripts" / "files-answer.sh"), "--no-wait", str(tmp_path), "001",
+                               json.dumps(ANSWER)], capture_output=True, text=True, timeout=60,
+                              env={**os.environ, "FILES_ANSWER_WAIT_S": "600"})
+    flier.join(10)
+    assert answered.returncode == 0 and answered.stdout == f"{tmp_path}/001.answer.json\n"
+    assert [d.core() for d in decisions] == [ANSWER]

@@ -258,6 +258,8 @@ _VALID_IMAGE = re.compile(IMAGE_PATTERN)
 def map_body(ctx, body):
     if isinstance(body, dict) and isinstance(body.get("image"), str) and _VALID_IMAGE.match(body["image"]):
         body = {**body, "image": _b64(size=(8, 6))}
+    if isinstance(body, dict) and isinstance(body.get("history"), list):  # earlier turns' images, the same way
+        body = {**body, "history": [map_body(ctx, turn) for turn in body["history"]]}
     return body
 
 

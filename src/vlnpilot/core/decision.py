@@ -84,6 +84,21 @@ class Decision(DecisionFields):
 
 
 @dataclass(frozen=True)
+class EarlierTurn:
+    """One earlier step of a pilot's conversation (the `history` option): what the pilot was asked then and what it
+    answered. The query, map and profile are the episode's; `image` is None when it is not sent again."""
+
+    step: int
+    state: State
+    previous_movement: str | None
+    answer: str  # the model's own reply text
+    image: np.ndarray | None = field(default=None, repr=False)
+    feedback: tuple[str, ...] = ()
+    context: tuple[str, ...] = ()
+    in_state: str | None = None
+
+
+@dataclass(frozen=True)
 class PilotInput:
     """What a pilot sees at one step: the paper's five inputs plus controller feedback."""
 
@@ -96,6 +111,12 @@ class PilotInput:
     profile: str = "paper"  # FSM profile: which moves each state allows
     feedback: tuple[str, ...] = ()  # validation errors of a re-ask, shield and oscillation notes
     context: tuple[str, ...] = ()  # pilot context beyond the paper (prompting.context): odometry, budget, memory
+    # What the previous states and movements imply about the current state (the moves flown in it), stated by the
+    # controller in every context so that no rule needs the pilot's memory (vlnpilot.prompting.context.StateProgress).
+    in_state: str | None = None
+    # The conversation so far, when the caller holds it (the pilot server's client): None lets a model pilot use
+    # its own `history` option; a tuple (even empty) is the whole conversation, and the pilot remembers nothing.
+    history: tuple[EarlierTurn, ...] | None = None
 
 
 class DecisionError(VLNPilotError):

@@ -144,12 +144,12 @@ class PilotAsker:
         feedback = list(self.notes)
         image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
         step_end = time.monotonic() + (config.step_deadline_s or 0.0)
-        context_lines = self.context.lines(step)
+        context_lines, in_state = self.context.lines(step), self.context.in_state()
         attempt, reasks = 0, 0
         while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=self.task.query, topological_map=self.topo, state=state,
                              previous_movement=self.previous, step=step, profile=config.profile,
-                             feedback=tuple(feedback), context=context_lines)
+                             feedback=tuple(feedback), context=context_lines, in_state=in_state)
             answer = ask(flier, pin, state, config.profile, step_end - time.monotonic())
             attempt += 1
             out.usages.append(answer.usage)

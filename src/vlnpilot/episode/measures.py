@@ -227,6 +227,11 @@ def _tokens(s: Any) -> str:
     return f"{s.input_tokens}/{s.output_tokens}"
 
 
+def _tokens_per_call(s: Any) -> str:
+    """Input tokens per pilot call: what a step's prompt costs (the `history` option's earlier turns included)."""
+    return f"{s.input_tokens / s.pilot_calls:.0f}" if s.pilot_calls else "--"
+
+
 class PilotUsage:
     """Tokens, cost, latency and calls of every pilot call, re-asks and unexecuted steps included. (The bench's
     latency percentiles come from its workers' per-call timings, or from `latency_s_total` / `pilot_calls`.)"""
@@ -236,6 +241,7 @@ class PilotUsage:
     aggregates = (Total("input_tokens"), Total("output_tokens"), Total("cost_usd", float), Total("pilot_calls"))
     columns = (Column(140, "Tokens in/out", "Tokens in/out", ("input_tokens", "output_tokens"), _tokens,
                       lambda s: (s.input_tokens, s.output_tokens)),
+               Column(145, "Tokens in/call", None, (), _tokens_per_call, lambda s: ()),
                column("cost_usd", md="Cost (USD)", tex="Cost (\\$)", fmt=".4f", csv_fmt=".6f", rank=150),
                column("pilot_calls", md=None, tex=None, rank=160))
 

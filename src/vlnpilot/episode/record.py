@@ -115,6 +115,8 @@ class EpisodeRecording:
         self.recorder.start({
             "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
+            # a model pilot's conversation memory ('none', 'history=N'); a pilot without the option says nothing
+            **({"pilot_memory": memory} if isinstance(memory := getattr(pilot, "memory", None), str) else {}),
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
                        "context": {"preset": context_name(config.context), **config.context.to_dict()},
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,

@@ -14,7 +14,7 @@ import os
 import random
 import re
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, ClassVar, Literal, TypeVar
@@ -35,6 +35,7 @@ from vlnpilot.core.decision import (
 )
 from vlnpilot.pilots import pricing
 from vlnpilot.pilots._gate import CallGate
+from vlnpilot.pilots._history import Conversation, Message, messages
 from vlnpilot.pilots.base import BasePilot, PilotError
 from vlnpilot.pilots.options import ModelOptions
 
@@ -286,7 +287,7 @@ def _int(value: Any) -> int:
 class ModelPilot(BasePilot):
     """Base of the SDK pilots: options, the decide() skeleton, reply checks, usage and cost.
 
-    Subclasses set the class attributes and implement `_call(prompt) -> Reply`, raising PilotError
+    Subclasses set the class attributes and implement `_call(prompt, chat) -> Reply`, raising PilotError
     on transport/HTTP failures (after the SDK's or our retries).
     """
 
@@ -306,6 +307,9 @@ class ModelPilot(BasePilot):
         self.jpeg_quality = options.jpeg_quality
         self.max_side = options.max_side
         self.validate = options.validate_replies
+        # Conversation memory (pilots/_history.py): 'none', or the last N turns sent again as chat messages.
+        self.conversation = Conversation(options.history, options.history_images)
+        self.memory = self.conversation.label
         prices = options.prices
         self._prices = pricing.load_prices(prices) if isinstance(prices, Path) else prices
         self._gate = CallGate()  # subclasses hook it into their SDK's HTTP client (see cancel_pending)
@@ -336,21 +340,23 @@ class ModelPilot(BasePilot):
 
     # -- the skeleton
     def decide(self, pilot_input: PilotInput) -> Decision:
-        from vlnpilot.prompting.render import build_prompt
-
-        prompt = build_prompt(pilot_input, jpeg_quality=self.jpeg_quality, max_side=self.max_side)
+        earlier = self.conversation.earlier(pilot_input)
+        prompt, chat = messages(pilot_input, earlier, jpeg_quality=self.jpeg_quality, max_side=self.max_side)
         self._gate.enter()
         t0 = time.perf_counter()
         try:
-            reply = self._call(prompt)
+            reply = self._call(prompt, chat)
         except PilotError as exc:
             raise scrub(exc, self._secret.value) from None
         except Exception as exc:  # an SDK failure our mapping did not foresee: still a PilotError, never a crash
             raise scrub(self._unexpected(exc), self._secret.value) from None
         usage = self._usage(reply, time.perf_counter() - t0)
-        return self._decision(reply, usage, pilot_input)
+        decision = self._decision(reply, usage, pilot_input)
+        self.conversation.remember(pilot_input, decision.raw_text)
+        return decision
 
-    def _call(self, prompt: Any) -> Reply:  # pragma: no cover - abstract
+    def _call(self, prompt: Any, chat: Sequence[Message] | None = None) -> Reply:  # pragma: no cover - abstract
+        """Send `chat` (pilots/_history.messages: the earlier turns, then this step's; None: this step's alone)."""
         raise NotImplementedError
 
     def _unexpected(self, exc: BaseException) -> PilotError:

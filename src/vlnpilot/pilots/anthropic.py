@@ -2,7 +2,8 @@
 
 The state's answer schema is the `input_schema` of a single tool, `submit_decision`, and tool_choice
 forces it, so the reply is the tool's JSON input. Prompt caching: cache_control marks the end of the
-system prompt, of the episode context and of the state prompt; the image and the step text come last.
+system prompt, of the episode context and of the state prompt; the image and the step text come last. With the
+`history` option it also marks the end of the earlier turns (the model's last answer): four breakpoints at most.
 (Anthropic's cache prefix starts with the tools, and the tool schema is per state, so the cache hits
 across the consecutive steps spent in one state, which is most of an episode.)
 """
@@ -11,11 +12,13 @@ from __future__ import annotations
 
 import base64
 import logging
+from collections.abc import Sequence
 from typing import Any
 
 import anthropic as anthropic_sdk
 
 from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, resolve_api_key
+from vlnpilot.pilots._history import Message, Part, single
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import ModelOptions, secret_value
 
@@ -69,7 +72,13 @@ class AnthropicPilot(ModelPilot):
             block["cache_control"] = _CACHE
         return block
 
-    def _kwargs(self, prompt: Any) -> dict[str, Any]:
+    def _block(self, part: Part) -> dict[str, Any]:
+        if part.jpeg is None:
+            return self._text(part.text or "", cache=part.cache)
+        return {"type": "image", "source": {"type": "base64", "media_type": "image/jpeg",
+                                            "data": base64.b64encode(part.jpeg).decode("ascii")}}
+
+    def _kwargs(self, prompt: Any, chat: Sequence[Message] | None = None) -> dict[str, Any]:
         tool: dict[str, Any] = {
             "name": TOOL_NAME,
             "description": "Submit the drone's next decision in the required output format.",
@@ -81,13 +90,8 @@ class AnthropicPilot(ModelPilot):
             "model": self.model,
             "max_tokens": self.max_output_tokens,
             "system": [self._text(prompt.system, cache=True)],
-            "messages": [{"role": "user", "content": [
-                self._text(prompt.context, cache=True),
-                self._text(prompt.state_prompt, cache=True),
-                {"type": "image", "source": {"type": "base64", "media_type": "image/jpeg",
-                                             "data": base64.b64encode(prompt.image_jpeg).decode("ascii")}},
-                self._text(prompt.step_text),
-            ]}],
+            "messages": [{"role": m.role, "content": [self._block(p) for p in m.parts]}
+                         for m in (single(prompt) if chat is None else chat)],
             "tools": [tool],
             "tool_choice": {"type": "tool", "name": TOOL_NAME},
         }
@@ -99,9 +103,9 @@ class AnthropicPilot(ModelPilot):
         return map_stainless_error(exc, anthropic_sdk, provider=self.provider, key_env="ANTHROPIC_API_KEY",
                                    model=self.model, base_url=self.base_url, timeout_s=self.timeout)
 
-    def _call(self, prompt: Any) -> Reply:
+    def _call(self, prompt: Any, chat: Sequence[Message] | None = None) -> Reply:
         try:
-            message = self._client.messages.create(**self._kwargs(prompt))
+            message = self._client.messages.create(**self._kwargs(prompt, chat))
         except anthropic_sdk.AnthropicError as exc:
             raise self._error(exc) from None
         return _reply(message)

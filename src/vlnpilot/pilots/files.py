@@ -9,7 +9,8 @@ answerer only ever answers the newest prompt). For call NNN the pilot writes, ea
     DIR/NNN.prompt.md    the step's user text exactly as `build_prompt` renders it, then the answer instructions
                          (written after the image: its appearance means the call is complete)
     DIR/latest.txt       NNN, so that an answerer finds the newest prompt cheaply
-    DIR/system.md        the system prompt, once per episode (the episode's first prompt says to read it)
+    DIR/system.md        the system prompt, once per episode (the episode's first prompt says to read it first,
+                         and every later prompt names it, so that a fresh pilot can answer any one call)
 
 and then waits for DIR/NNN.answer.json: one JSON object with the five fields of the paper's output format.
 The controller validates the answer like any model's and re-asks with the reason (the next prompt's
@@ -77,6 +78,8 @@ def _answer_instructions(call: str, first_of_episode: bool) -> str:
     lines = ["## Your answer", f"The front camera image of this step is `{call}.png` in this directory."]
     if first_of_episode:
         lines.append("This is the first prompt of the episode: read the system prompt in `system.md` first.")
+    else:  # so that a fresh pilot per step (a stateless trial, docs/pilot-memory.md) finds it from any prompt
+        lines.append("The system prompt, the same for the whole episode, is `system.md` in this directory.")
     lines.append(f"Write ONE JSON object with the fields {', '.join(FIELDS)} to `{call}.answer.json` in this "
                  "directory, atomically (write a temporary file, then rename it).")
     return "\n".join(lines) + "\n"

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -37,6 +38,7 @@ from vlnpilot.pilots._common import (
     status_error,
     timeout_error,
 )
+from vlnpilot.pilots._history import Message, single
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import ModelOptions, secret_value
 
@@ -157,14 +159,12 @@ class GeminiPilot(ModelPilot):
             config["media_resolution"] = _MEDIA_RESOLUTIONS[self.media_resolution]
         return types.GenerateContentConfig(**config)
 
-    def _contents(self, prompt: Any) -> list[types.Content]:
-        # Stable parts first (implicit caching keys on the prefix); the image and the step text last.
-        return [types.Content(role="user", parts=[
-            types.Part.from_text(text=prompt.context),
-            types.Part.from_text(text=prompt.state_prompt),
-            types.Part.from_bytes(data=prompt.image_jpeg, mime_type="image/jpeg"),
-            types.Part.from_text(text=prompt.step_text),
-        ])]
+    def _contents(self, prompt: Any, chat: Sequence[Message] | None = None) -> list[types.Content]:
+        # Stable parts first (implicit caching keys on the prefix): earlier turns, then the image and the step text.
+        return [types.Content(role="model" if m.role == "assistant" else "user", parts=[
+            types.Part.from_text(text=p.text or "") if p.jpeg is None else
+            types.Part.from_bytes(data=p.jpeg, mime_type="image/jpeg") for p in m.parts])
+            for m in (single(prompt) if chat is None else chat)]
 
     def _classify(self, exc: BaseException) -> tuple[bool, float | None]:
         if isinstance(exc, genai_errors.APIError):
@@ -187,8 +187,8 @@ class GeminiPilot(ModelPilot):
             return connection_error(self.provider, self.base_url, exc)
         return self._unexpected(exc)
 
-    def _call(self, prompt: Any) -> Reply:
-        config, contents = self._config(prompt), self._contents(prompt)
+    def _call(self, prompt: Any, chat: Sequence[Message] | None = None) -> Reply:
+        config, contents = self._config(prompt), self._contents(prompt, chat)
         try:
             response = call_with_retries(
                 lambda: self._client.models.generate_content(model=self.model, contents=contents, config=config),

@@ -15,12 +15,14 @@ from __future__ import annotations
 import base64
 import logging
 import os
+from collections.abc import Sequence
 from typing import Any, Literal
 from urllib.parse import urlsplit
 
 import openai as openai_sdk
 
 from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, redact, resolve_api_key
+from vlnpilot.pilots._history import Message, Part, single
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import ModelOptions, secret_value
 
@@ -84,21 +86,24 @@ class OpenAIPilot(ModelPilot):
         return f"OpenAIPilot(model={self.model!r}, base_url={self.base_url!r}, detail={self.detail!r})"
 
     # ------------------------------------------------------------ request
-    def _messages(self, prompt: Any) -> list[dict[str, Any]]:
-        # Stable parts first: OpenAI and vLLM prefix caches hit on system + context + state prompt.
-        image_url = "data:image/jpeg;base64," + base64.b64encode(prompt.image_jpeg).decode("ascii")
-        return [
-            {"role": "system", "content": prompt.system},
-            {"role": "user", "content": [
-                {"type": "text", "text": prompt.context},
-                {"type": "text", "text": prompt.state_prompt},
-                {"type": "image_url", "image_url": {"url": image_url, "detail": self.detail}},
-                {"type": "text", "text": prompt.step_text},
-            ]},
-        ]
+    def _messages(self, prompt: Any, chat: Sequence[Message] | None = None) -> list[dict[str, Any]]:
+        # Stable parts first: OpenAI and vLLM prefix caches hit on system + context + state prompt (+ earlier turns).
+        out: list[dict[str, Any]] = [{"role": "system", "content": prompt.system}]
+        for message in single(prompt) if chat is None else chat:
+            if message.role == "assistant":
+                out.append({"role": "assistant", "content": "".join(p.text or "" for p in message.parts)})
+            else:
+                out.append({"role": "user", "content": [self._part(p) for p in message.parts]})
+        return out
 
-    def _kwargs(self, prompt: Any, fmt: str) -> dict[str, Any]:
-        kwargs: dict[str, Any] = {"model": self.model, "messages": self._messages(prompt),
+    def _part(self, part: Part) -> dict[str, Any]:
+        if part.jpeg is None:
+            return {"type": "text", "text": part.text}
+        url = "data:image/jpeg;base64," + base64.b64encode(part.jpeg).decode("ascii")
+        return {"type": "image_url", "image_url": {"url": url, "detail": self.detail}}
+
+    def _kwargs(self, prompt: Any, fmt: str, chat: Sequence[Message] | None = None) -> dict[str, Any]:
+        kwargs: dict[str, Any] = {"model": self.model, "messages": self._messages(prompt, chat),
                                   self.max_tokens_param: self.max_output_tokens}
         if self.temperature is not None:
             kwargs["temperature"] = self.temperature
@@ -115,18 +120,18 @@ class OpenAIPilot(ModelPilot):
         return map_stainless_error(exc, openai_sdk, provider=self.provider, key_env="OPENAI_API_KEY",
                                    model=self.model, base_url=self.base_url, timeout_s=self.timeout)
 
-    def _call(self, prompt: Any) -> Reply:
+    def _call(self, prompt: Any, chat: Sequence[Message] | None = None) -> Reply:
         fmt = self._format
         try:
             try:
-                response = self._client.chat.completions.create(**self._kwargs(prompt, fmt))
+                response = self._client.chat.completions.create(**self._kwargs(prompt, fmt, chat))
             except (openai_sdk.BadRequestError, openai_sdk.UnprocessableEntityError) as exc:
                 if not (self.response_format == "auto" and fmt == "json_schema" and _rejects_format(exc)):
                     raise
                 log.warning("%s rejected json_schema structured output (%s); using JSON mode from now on",
                             self.provider, redact(getattr(exc, "message", exc))[:200])
                 self._format = fmt = "json_object"
-                response = self._client.chat.completions.create(**self._kwargs(prompt, fmt))
+                response = self._client.chat.completions.create(**self._kwargs(prompt, fmt, chat))
         except openai_sdk.OpenAIError as exc:
             raise self._error(exc) from None
         return _reply(response)

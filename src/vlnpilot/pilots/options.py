@@ -10,9 +10,9 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, ValidationInfo, field_validator
 
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.exits import shorten
@@ -110,7 +110,39 @@ class OpenPilotOptions(PilotOptions):
     model_config = ConfigDict(extra="allow")
 
 
-class ModelOptions(PilotOptions):
+MAX_HISTORY = 20  # earlier turns a pilot may send again (each is a state prompt, a step text and perhaps an image)
+
+
+class ConversationOptions(PilotOptions):
+    """Conversation memory (`pilots._history`): `history` is 'none' (one message per step, the paper's pilot) or the
+    number N of earlier turns sent again as chat messages (text always); `history_images` of them (the last ones)
+    keep their image."""
+
+    history: int | Literal["none"] = "none"
+    history_images: int = Field(0, ge=0)
+
+    @field_validator("history", mode="before")
+    @classmethod
+    def _turns(cls, value: Any) -> int | str:
+        text = str(value).strip().lower()
+        if text in ("none", "0"):
+            return "none"
+        if text.isdigit() and 1 <= int(text) <= MAX_HISTORY and not isinstance(value, bool):
+            return int(text)
+        raise ValueError(f"history is 'none' or a number of earlier turns from 1 to {MAX_HISTORY}")
+
+    @field_validator("history_images")
+    @classmethod
+    def _images(cls, value: int, info: ValidationInfo) -> int:
+        turns = info.data.get("history")
+        turns = 0 if turns in (None, "none") else turns
+        if value > turns:
+            raise ValueError(f"history_images ({value}) cannot exceed the earlier turns sent "
+                             f"(history={turns or 'none'})")
+        return value
+
+
+class ModelOptions(ConversationOptions):
     """What every SDK pilot (`pilots._common.ModelPilot`) takes; each provider's class adds its own and its model."""
 
     model: str

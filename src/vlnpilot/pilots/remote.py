@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 import httpx
 from pydantic import Field, SecretStr
 
-from vlnpilot.core.decision import Decision, PilotInput, PilotTraits, Usage
+from vlnpilot.core.decision import Decision, EarlierTurn, PilotInput, PilotTraits, Usage
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.pilots._common import (
     REPLY_REASONS,
@@ -30,8 +30,9 @@ from vlnpilot.pilots._common import (
     timeout_error,
 )
 from vlnpilot.pilots._gate import CallCancelled, CallGate
+from vlnpilot.pilots._history import Conversation
 from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
-from vlnpilot.pilots.options import PilotOptions, secret_value
+from vlnpilot.pilots.options import ConversationOptions, secret_value
 
 URL_ENV = "VLN_PILOT_URL"
 TOKEN_ENV = "VLN_PILOT_TOKEN"
@@ -44,8 +45,10 @@ class _Retryable(Exception):
         self.response = response
 
 
-class RemoteOptions(PilotOptions):
-    """The options of the remote pilot. `transport` is programmatic (an httpx transport, for tests)."""
+class RemoteOptions(ConversationOptions):
+    """The options of the remote pilot. `transport` is programmatic (an httpx transport, for tests). `history` and
+    `history_images` are the model pilots' conversation memory: this pilot keeps it and sends it with each request
+    (the server is stateless and shared)."""
 
     programmatic: ClassVar[frozenset[str]] = frozenset({"transport"})
 
@@ -68,7 +71,8 @@ class RemotePilot(BasePilot):
     Options (`RemoteOptions`): model (the server-side pilot SPEC, e.g. "openai:gpt-4.1"; default: the server's),
     url (default env VLN_PILOT_URL or http://127.0.0.1:8000), token (default env VLN_PILOT_TOKEN),
     timeout (seconds per HTTP call, default 90), max_retries (default 2), retry_base_delay,
-    jpeg_quality, max_side, transport (an httpx transport, for tests).
+    jpeg_quality, max_side, history and history_images (conversation memory, sent with each request), transport
+    (an httpx transport, for tests).
     """
 
     traits = PilotTraits(uses_step_deadline=True)  # waits on a network: the controller bounds each step
@@ -86,6 +90,8 @@ class RemotePilot(BasePilot):
         self.retry_base_delay = o.retry_base_delay
         self.jpeg_quality = o.jpeg_quality
         self.max_side = o.max_side
+        self.conversation = Conversation(o.history, o.history_images)
+        self.memory = self.conversation.label
         token = secret_value(o.token) or os.environ.get(TOKEN_ENV) or None
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self._gate = CallGate()  # abandoned calls send nothing more (see cancel_pending)
@@ -118,9 +124,22 @@ class RemotePilot(BasePilot):
             "context": list(pilot_input.context),
             "step": pilot_input.step,
         }
+        if pilot_input.in_state is not None:
+            payload["in_state"] = pilot_input.in_state
+        if self.conversation.turns:
+            payload["history"] = [self._turn(t) for t in self.conversation.earlier(pilot_input)]
         if self.model:
             payload["pilot"] = self.model
         return payload
+
+    def _turn(self, turn: EarlierTurn) -> dict[str, Any]:
+        from vlnpilot.prompting.render import encode_jpeg
+
+        image = (None if turn.image is None else
+                 base64.b64encode(encode_jpeg(turn.image, self.jpeg_quality, self.max_side)).decode("ascii"))
+        return {"step": turn.step, "state": str(turn.state), "previous_movement": turn.previous_movement,
+                "answer": turn.answer, "image": image, "feedback": list(turn.feedback), "context": list(turn.context),
+                "in_state": turn.in_state}
 
     def _post(self, payload: dict[str, Any]) -> httpx.Response:
         response = self._client.post("/v1/decide", json=payload)
@@ -156,6 +175,7 @@ class RemotePilot(BasePilot):
             except ValueError as exc:
                 raise PilotError(f"the pilot server at {self.url} sent a malformed decision: {redact(exc)[:300]}",
                                  reason="bad_response") from None
+            self.conversation.remember(pilot_input, decision.raw_text)
             return decision.model_copy(update={"usage": decision.usage.model_copy(update={"latency_s": round(
                 latency, 4)})})
         raise self._error(response)

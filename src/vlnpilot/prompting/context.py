@@ -1,5 +1,6 @@
 """What the pilot is told beyond the paper's five inputs: odometry, the step budget, a short memory and a
-confirmation before a final state.
+confirmation before a final state; and, in every context, the moves flown in the current state (`in_state_text`:
+what the previous states and movements imply, so that no rule needs the pilot's memory; docs/pilot-memory.md).
 
 A real VLM flying from images alone cannot tell how far it has flown: a doorway fills the wide-angle view
 (and its frame leaves the image) about half a metre *before* the drone reaches it, and 10 cm moves barely change
@@ -97,28 +98,49 @@ class Travel:
         return ", ".join(parts)
 
 
+LISTED_MOVES = 8  # the moves of the current state that its line names (all of them are counted)
+
+
+def in_state_text(moves: tuple[str, ...], travel: Travel) -> str:
+    """The controller's line on the current state: the moves flown in it so far, their codes and where they took the
+    drone. Every context states it: it is what the previous states and movements (paper inputs) imply."""
+    if not moves:
+        return "0 moves flown in this state so far (this is its first step): forward 0.00 m, net rotation 0°."
+    shown = moves[-LISTED_MOVES:]
+    which = "" if len(shown) == len(moves) else f"the last {len(shown)}: "
+    codes = ", ".join(f"`{c}`" for c in shown)
+    return (f"{len(moves)} move{'s' if len(moves) != 1 else ''} flown in this state so far ({which}{codes}, oldest "
+            f"first): {travel.text()}.")
+
+
 class PilotContext:
     """Tracks the episode for the context items and renders them as lines of the step prompt."""
 
     def __init__(self, config: ContextConfig, max_steps: int):
         self.config, self.max_steps = config, max_steps
         self._in_state = Travel()
+        self._moves: tuple[str, ...] = ()  # the executed commands of the current state, oldest first
         self._since_door: Travel | None = None  # None until the first Go Through Door
         self._memory: deque[str] = deque(maxlen=config.memory)
 
     def update(self, step: int, state: State, decision: Any, executed: Command, next_state: State) -> None:
         """After a step: `executed` was flown in `state`, and the FSM moves on to `next_state`."""
         self._in_state = self._in_state.add(executed)
+        self._moves += (executed.code,)
         if self._since_door is not None:
             self._since_door = self._since_door.add(executed)
         if next_state is not state:
-            self._in_state = Travel()
+            self._in_state, self._moves = Travel(), ()
             if next_state is State.GO_THROUGH_DOOR:  # the crossing began with this step's move
                 self._since_door = Travel().add(executed)
         if decision is not None and self.config.memory:
             changed = "" if decision.movement == executed.code else f" (executed {executed.code})"
             self._memory.append(f"step {step}: in {state.value}, you chose {decision.movement}{changed} -> "
                                 f"{next_state.value}; room {decision.room}; you saw: {_short(decision.description)}")
+
+    def in_state(self) -> str:
+        """The line every context gets on the current state (`PilotInput.in_state`)."""
+        return in_state_text(self._moves, self._in_state)
 
     def lines(self, step: int) -> tuple[str, ...]:
         """The context lines of this step's prompt (empty for the paper context)."""

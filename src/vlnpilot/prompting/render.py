@@ -30,6 +30,7 @@ from vlnpilot.tasks.success import visual_cue_values
 
 __all__ = [
     "Prompt",
+    "IN_STATE_HEADING",
     "PromptTemplateError",
     "build_prompt",
     "decision_schema",
@@ -41,6 +42,10 @@ __all__ = [
     "system_prompt",
 ]
 
+
+
+# The step text's section on the current state (`PilotInput.in_state`); the state prompts' rules refer to it by name.
+IN_STATE_HEADING = "Flown in this state"
 
 
 class PromptTemplateError(VLNPilotError):
@@ -234,7 +239,7 @@ def _context(query: str, topological_map: Mapping[str, Any]) -> str:
 
 
 def _step_text(state: State, previous_movement: str | None, step: int, feedback: Sequence[str],
-               context: Sequence[str] = ()) -> str:
+               context: Sequence[str] = (), in_state: str | None = None) -> str:
     if previous_movement is None or not str(previous_movement).strip():
         previous = "none (this is the first step of the episode)"
     else:
@@ -243,7 +248,10 @@ def _step_text(state: State, previous_movement: str | None, step: int, feedback:
             previous = f"`{command.code}` ({command.description})"
         except UnknownNameError:
             previous = f"`{previous_movement}`"
-    text = f"## Current FSM state\n{state.value}\n\n## Previous movement\n{previous}\n\n## Step\n{step}\n"
+    text = f"## Current FSM state\n{state.value}\n\n## Previous movement\n{previous}\n\n"
+    if in_state:  # what the previous states and movements imply: the rules that count moves read it
+        text += f"## {IN_STATE_HEADING}\n{' '.join(in_state.split())}\n\n"
+    text += f"## Step\n{step}\n"
     if context:
         nested = ("  - " if line.startswith(" ") else "- " for line in context)  # memory items nest
         items = zip(nested, context, strict=True)
@@ -306,7 +314,7 @@ def build_prompt(pilot_input: PilotInput, *, jpeg_quality: int = 85, max_side: i
         context=_context(pilot_input.query, pilot_input.topological_map),
         state_prompt=render_state_prompt(state, pilot_input.profile),
         step_text=_step_text(state, pilot_input.previous_movement, pilot_input.step, pilot_input.feedback,
-                             pilot_input.context),
+                             pilot_input.context, pilot_input.in_state),
         image_jpeg=encode_jpeg(pilot_input.image, jpeg_quality, max_side),
         schema=decision_schema(state, pilot_input.profile, map_rooms(pilot_input.topological_map)),
     )
@@ -337,7 +345,8 @@ def prompt_hash(profile: str = "paper") -> str:
     sample_map = {"edges": [{"from": "a", "to": "b"}], "nodes": [{"id": "a", "name": "A"}, {"id": "b", "name": "B"}]}
     parts = [system_prompt(), _context("query", sample_map)]
     for state in ASKED_STATES:
-        parts += [render_state_prompt(state, profile), _step_text(state, "A1", 1, ("feedback",), ("context",))]
+        parts += [render_state_prompt(state, profile),
+                  _step_text(state, "A1", 1, ("feedback",), ("context",), "in state")]
         parts.append(json.dumps(decision_schema(state, profile, ["a", "b"]), sort_keys=True))
     for part in parts:
         h.update(part.encode("utf-8") + b"\x00")

@@ -2,7 +2,9 @@
 
 `POST /v1/decide` takes the paper's five inputs (image as base64 JPEG/PNG, query, topological map,
 state, previous movement) plus the FSM profile and controller feedback, asks a pilot, and returns
-its Decision. `GET /healthz` says the server is up; the OpenAPI docs are at /docs.
+its Decision. A client with conversation memory (the `remote` pilot's `history` option) sends its earlier turns
+with each request (`history`): the server is stateless, and its pilots never remember one client for another.
+`GET /healthz` says the server is up; the OpenAPI docs are at /docs.
 
 Errors are JSON (`ErrorBody`), never a traceback: 401 bad/missing bearer token, 403 a pilot this server
 does not serve (the body lists the allowed SPECs), 413 body too large, 415 not JSON, 422 bad field or image,
@@ -34,11 +36,12 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from vlnpilot.core.commands import COMMANDS, get_command
-from vlnpilot.core.decision import DecisionFields, PilotInput, Usage
+from vlnpilot.core.decision import DecisionFields, EarlierTurn, PilotInput, Usage
 from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
 from vlnpilot.core.fsm import ASKED_STATES, PROFILES, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
 from vlnpilot.pilots.base import Pilot, PilotError, make_pilot
+from vlnpilot.pilots.options import MAX_HISTORY
 from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, refuse_privileged
 
 log = logging.getLogger(__name__)
@@ -74,6 +77,22 @@ def _whole_float_to_int(value: Any) -> Any:
 WholeNumber = Annotated[int, BeforeValidator(_whole_float_to_int)]
 
 
+class EarlierTurnRequest(BaseModel):
+    """One earlier turn of the client's conversation (the `history` option): what it asked then, what it answered."""
+
+    model_config = ConfigDict(extra="forbid", strict=True)
+
+    step: WholeNumber = Field(ge=0, le=1_000_000)
+    state: AskedState
+    previous_movement: CommandCode | None = None
+    answer: str = Field(max_length=20_000, description="the model's own reply text at that step")
+    image: str | None = Field(default=None, min_length=8, pattern=IMAGE_PATTERN,
+                              description="that step's image (base64 JPEG or PNG), or null when it is not sent again")
+    feedback: list[str] = Field(default_factory=list, max_length=20)
+    context: list[str] = Field(default_factory=list, max_length=20)
+    in_state: str | None = Field(default=None, max_length=1000)
+
+
 class DecideRequest(BaseModel):
     """One step's inputs (the paper's five, plus the FSM profile, controller feedback and the pilot to ask)."""
 
@@ -95,6 +114,11 @@ class DecideRequest(BaseModel):
     context: list[str] = Field(default_factory=list, description="pilot context lines (odometry, budget, memory)",
                                max_length=20)
     step: WholeNumber = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
+    in_state: str | None = Field(default=None, max_length=1000,
+                                 description="the moves flown in the current state, as the controller states them")
+    history: list[EarlierTurnRequest] | None = Field(
+        default=None, max_length=MAX_HISTORY, description="earlier turns of the conversation, oldest first (the "
+        "client's `history` option); the server remembers nothing between requests")
     pilot: str | None = Field(default=None, description="pilot SPEC (name or name:model); default: the server's",
                               max_length=200)
 
@@ -257,10 +281,19 @@ def _pilot_input(req: DecideRequest) -> PilotInput:
     else:
         previous = None
     image = decode_image(req.image)
+    # Always a tuple: a pilot of the server (shared by its clients) never keeps a conversation of its own.
+    history = tuple(_earlier_turn(t) for t in req.history or ())
     return PilotInput(image=image, query=req.query, topological_map=req.topological_map, state=state,
                       previous_movement=previous, step=req.step, profile=req.profile,
                       feedback=tuple(str(f)[:500] for f in req.feedback),
-                      context=tuple(str(c)[:500] for c in req.context))
+                      context=tuple(str(c)[:500] for c in req.context), in_state=req.in_state, history=history)
+
+
+def _earlier_turn(turn: EarlierTurnRequest) -> EarlierTurn:
+    return EarlierTurn(step=turn.step, state=parse_state(turn.state), previous_movement=turn.previous_movement,
+                       answer=turn.answer, image=None if turn.image is None else decode_image(turn.image),
+                       feedback=tuple(str(f)[:500] for f in turn.feedback),
+                       context=tuple(str(c)[:500] for c in turn.context), in_state=turn.in_state)
 
 
 # ------------------------------------------------------------------------------------------ the app
