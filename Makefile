@@ -1,6 +1,6 @@
 # Two commands do all the set-up on a fresh Debian/Ubuntu machine: `make demo` and `make test`.
 # Both are idempotent: they install what is missing (system GL libraries, the virtual environment,
-# the package) and then run.
+# the package) and then run. `make test` also builds the documentation (mkdocs.yml) strictly.
 PYTHON ?= python3
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -13,6 +13,7 @@ demo: sysdeps $(STAMP)
 
 test: sysdeps testdeps $(STAMP)
 	$(PY) -m pytest -q
+	$(VENV)/bin/mkdocs build --strict --quiet --site-dir $(VENV)/site   # a broken link or anchor fails
 
 sysdeps:
 	@bash scripts/install-system-deps.sh gl

@@ -1,4 +1,4 @@
-"""The README's gallery of procedural houses: per house its floor plan beside one drone view, in one image.
+"""The gallery of procedural houses (docs/houses.md): per house its floor plan beside one drone view, in one image.
 
     .venv/bin/python scripts/house_gallery.py [--seeds 0,1,5,9,16,36] [--out docs/img/houses-gallery.jpg]
 

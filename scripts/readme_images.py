@@ -1,5 +1,6 @@
-"""Render the README's pictures: the front view from every spawn and in front of every target, a chase
-view, and the floor plan. Run: .venv/bin/python scripts/readme_images.py [--out docs/img]"""
+"""Render the documentation's pictures (docs/img, shown by docs/simulator.md): the front view from every spawn
+and in front of every target, a chase view, and the floor plan.
+Run: .venv/bin/python scripts/readme_images.py [--out docs/img]"""
 
 from __future__ import annotations
 

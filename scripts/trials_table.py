@@ -1,7 +1,8 @@
 """The real-VLM trials as tables: outcomes per set (the README's before/after table) and one line per trial.
 
     python scripts/trials_table.py [trials]            # markdown on stdout
-    python scripts/trials_table.py --write [trials]    # the same tables into README.md and trials/README.md
+    python scripts/trials_table.py --write [trials]    # the same tables into README.md (the summary),
+                                                       # docs/results.md (per row) and trials/README.md
 
 Reads only trials/SET/ROW/trial.json, so every figure in the README comes from the committed trials.
 """
@@ -88,11 +89,11 @@ def replace_table(text: str, table: str) -> str:
 
 
 def write_readmes(root: Path) -> None:
-    """Put the tables into README.md (summary, rows) and trials/README.md (one line per trial)."""
+    """Put the tables into README.md (summary), docs/results.md (rows) and trials/README.md (one line per trial)."""
     sets = load(root)
-    readme = root.parent / "README.md"
-    text = replace_table(replace_table(readme.read_text(), summary_table(sets)), row_table(sets))
-    readme.write_text(text)
+    readme, results = root.parent / "README.md", root.parent / "docs" / "results.md"
+    readme.write_text(replace_table(readme.read_text(), summary_table(sets)))
+    results.write_text(replace_table(results.read_text(), row_table(sets)))
     (root / "README.md").write_text(replace_table((root / "README.md").read_text(), trial_lines(sets)))
 
 

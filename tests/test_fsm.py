@@ -194,10 +194,10 @@ def test_hover_goes_with_a_final_state_and_a_next_state_move_is_explained() -> N
     assert "E" not in state_spec(State.SEARCH_OBJECT).answer_moves  # no final state reachable from there
 
 
-def test_the_readme_command_table_is_the_command_table() -> None:
+def test_the_documented_command_table_is_the_command_table() -> None:
     from pathlib import Path
 
     from vlnpilot.core.commands import command_table_markdown
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
-    assert command_table_markdown() in readme
+    page = (Path(__file__).resolve().parents[1] / "docs" / "simulator.md").read_text()
+    assert command_table_markdown() in page

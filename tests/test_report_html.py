@@ -75,9 +75,9 @@ def test_episode_report_is_self_contained_and_complete(run: Path) -> None:
 
 def test_model_text_is_escaped(run: Path) -> None:
     html = write_episode_report(run).read_text(encoding="utf-8")
-    assert "<script>window.__pwned" not in html and "onerror=" not in html.replace("onerror=&quot;", "")
-    assert html.count("<script>") == 1  # the page's own
+    assert "<script>window.__pwned" not in html and html.count("<script>") == 1  # the page's own
     page = parse(run / "report.html")
+    assert not [a for _, a in page.tags if "onerror" in a]  # no attribute came from model text
     assert EVIL in " ".join(page.text)  # shown literally, as text
 
 

@@ -97,7 +97,7 @@ def get_command(code: str) -> Command:
 
 
 def command_table_markdown() -> str:
-    """The command table for the docs (the README holds it verbatim; a test keeps them equal)."""
+    """The command table for the docs (docs/simulator.md holds it verbatim; a test keeps them equal)."""
     rows = ["| command | what it does |", "|---|---|"]
     rows += [f"| `{c.code}` | {c.description} |" for c in COMMANDS.values()]
     return "\n".join(rows)

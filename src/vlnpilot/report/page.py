@@ -1,17 +1,21 @@
-"""The frame both report pages share: escaping, number formatting, the page skeleton and its stylesheet.
+"""What both report pages share: the Jinja2 environment (autoescape on), number formatting, the stylesheet.
 
-The stylesheet and the scripts are package data (`report/static/`), read once and inlined into every page so
-that a page opens from disk with no server and no network.
+The markup lives in `report/templates/` (`base.html.j2` is the page frame, `macros.html.j2` the small pieces);
+Jinja2 escapes every value a template prints, so model text (untrusted) can only ever show as text. Python
+code here and in the page modules computes values, never markup. The stylesheet and the scripts are package data
+(`report/static/`), read once and inlined into every page so that a page opens from disk with no server and no
+network.
 """
 
 from __future__ import annotations
 
-import html
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
+
+from jinja2 import Environment, PackageLoader, StrictUndefined
 
 REPORT = "report.html"
 FLOORPLAN = "floorplan.png"
@@ -25,11 +29,6 @@ def static_text(name: str) -> str:
 
 
 CSS = static_text("report.css")
-
-
-def esc(value: Any) -> str:
-    """HTML-escape anything (None as an empty string), quotes included so it is safe in attributes too."""
-    return "" if value is None else html.escape(str(value), quote=True)
 
 
 # -- formatting -----------------------------------------------------------------------------------------
@@ -75,30 +74,30 @@ def _image_size(path: Path) -> tuple[int, int] | None:
         return None
 
 
-def _room_chip(scene: Any, room_id: str | None) -> str:
-    """A room name with a swatch of its floor-plan colour (the paper's colours); plain text when unknown."""
+def room_view(scene: Any, room_id: str | None) -> dict[str, str | None]:
+    """A room as the `room_chip` macro shows it: its name and floor-plan colour (the paper's colours), or the raw
+    id with no colour when the scene does not know it."""
     room = scene.find_room(room_id) if scene is not None and room_id else None
     if room is None:
-        return esc(room_id or "–")
-    return f'<span class="room" style="--room:{_css_rgb(room.color)}">{esc(room.name)}</span>'
+        return {"name": room_id or "–", "color": None}
+    return {"name": room.name, "color": _css_rgb(room.color)}
 
 
-def _page(title: str, body: str, script: str = "") -> str:
-    js = f"<script>{script}</script>" if script else ""
-    return (f'<!DOCTYPE html>\n<html lang="en" class="no-js">\n<head>\n<meta charset="utf-8">\n'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n'
-            f'<meta name="generator" content="vln-pilot">\n<title>{esc(title)}</title>\n'
-            f'<link rel="icon" href="data:,">\n<style>{CSS}</style>\n</head>\n<body>\n<main>\n{body}\n</main>\n'
-            f'{js}\n</body>\n</html>\n')
+def _blank_none(value: Any) -> Any:
+    return "" if value is None else value
 
 
-def _fact(label: str, value: str, note: str = "") -> str:
-    small = f" <small>{note}</small>" if note else ""
-    return f"<div><dt>{esc(label)}</dt><dd>{value}{small}</dd></div>"
+def _environment() -> Environment:
+    env = Environment(loader=PackageLoader("vlnpilot.report", "templates"), autoescape=True, finalize=_blank_none,
+                      undefined=StrictUndefined, trim_blocks=True, lstrip_blocks=True, keep_trailing_newline=True)
+    env.filters.update(num=_num, int=_int, cost=_cost, command_text=_command_text)
+    env.globals.update(CSS=CSS)
+    return env
 
 
-def _state_badge(state: str | None, colors: Mapping[str, str]) -> str:
-    if not state:
-        return '<span class="dash">–</span>'
-    color = colors.get(state, "#9aa3ad")
-    return f'<span class="state" style="--c:{esc(color)}">{esc(state)}</span>'
+TEMPLATES = _environment()
+
+
+def render(template: str, **values: Any) -> str:
+    """A page from `report/templates/`, every printed value escaped."""
+    return TEMPLATES.get_template(template).render(**values)

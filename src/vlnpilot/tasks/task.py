@@ -16,7 +16,9 @@ from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.fsm import State
 from vlnpilot.core.records import Pose
+from vlnpilot.scene.geodesic import geodesic_length
 from vlnpilot.scene.model import Scene, _norm
+from vlnpilot.scene.validate import CLEARANCE_M, occupancy
 from vlnpilot.tasks.success import DEFAULT_SUCCESS, SuccessConfig
 
 
@@ -92,11 +94,25 @@ def judge(task: Task, final_state: State, gt: GroundTruth, config: SuccessConfig
 
 
 def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessConfig = DEFAULT_SUCCESS) -> float:
-    """Geodesic estimate for SPL: straight segments through the centres of the doors on the room path.
+    """The shortest path for SPL: geodesic on the validated occupancy grid at flight height (around furniture,
+    through doorways; `scene.geodesic`), from the start to the goal point.
 
-    For a room goal the path ends 0.1 m inside the goal room; for an object it ends on the target's facing
-    axis, 0.2 m inside the success distance. Furniture is ignored, so this is a lower bound.
+    For a room goal the path ends 0.1 m inside the goal room past the last door on the room path; for an object
+    it ends on the target's facing axis, 0.2 m inside the success distance. Where no clear path joins them (a
+    start inside the margins of a solid), the straight segments through the door centres stand in.
     """
+    through_doors = _door_waypoints(scene, start, task, config)
+    if len(through_doors) < 2:
+        return 0.0
+    grid = occupancy(scene, CLEARANCE_M)
+    geodesic = geodesic_length(grid, through_doors[0], through_doors[-1])
+    if geodesic is not None:
+        return geodesic
+    return sum(math.dist(p, q) for p, q in zip(through_doors, through_doors[1:], strict=False))
+
+
+def _door_waypoints(scene: Scene, start: Pose, task: Task, config: SuccessConfig) -> list[tuple[float, float]]:
+    """The start, the centres of the doors on the room path, and the goal point (the start alone when there)."""
     start_room = scene.room_at(start.x, start.y)
     pts = [(start.x, start.y)]
     if start_room is not None and start_room != task.goal_room:
@@ -112,7 +128,7 @@ def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessC
         d = config.object_distance_m - 0.2
         a = math.radians(t.facing_deg)
         pts.append((t.position[0] + d * math.cos(a), t.position[1] + d * math.sin(a)))
-    return sum(math.dist(p, q) for p, q in zip(pts, pts[1:], strict=False))
+    return pts
 
 
 # -- metrics (reset / update / value) -----------------------------------------------------------------
