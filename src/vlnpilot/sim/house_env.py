@@ -1,8 +1,9 @@
 """Gymnasium environment `VLNPilot/House-v0`: the cabin environment's rules in procedural houses.
 
 `reset(seed=S)` flies house `house:S` (the simulator is rebuilt only when the house changes); a Gymnasium seed
-beyond the houses' range (0..999999999) flies `house:S mod 10**9`; without a seed the current house is kept. Each episode starts at a random spawn of the house with a random goal room
-(both drawn from the reset seed) unless `options` gives `spawn` / `goal_room`.
+beyond the houses' range (0..999999999) flies `house:S mod 10**9`; without a seed the current house is kept.
+Each episode starts at a random spawn of the house with a random goal room (both drawn from the reset seed)
+unless `options` gives `spawn` / `goal_room`.
 """
 
 from __future__ import annotations
