@@ -333,3 +333,12 @@ def test_a_rotation_that_did_not_happen_is_not_recorded_as_executed(tmp_path: Pa
 def test_a_halt_before_the_move_records_nothing_executed() -> None:
     halt = RobotHalt("battery at 14 %")
     assert not halt.executed and halt.outcome == "halted"
+
+
+def test_the_link_loss_bench_smoke_mode_passes(capsys) -> None:
+    """bench/link_loss.py --smoke: two episodes whose emulator is killed end `link_lost`, landed, nothing after."""
+    import runpy
+
+    bench = runpy.run_path(str(Path(__file__).parents[2] / "bench" / "link_loss.py"))
+    assert bench["main"](["--smoke"]) == 0, capsys.readouterr().out
+    assert "2 runs (seed 0): 2 passed" in capsys.readouterr().out

@@ -131,8 +131,8 @@ class TelloEnv:
         reply = link.send("command", cfg.connect_timeout_s) or link.send("command", cfg.connect_timeout_s)
         if reply is None:  # "command" only enters SDK mode: asking twice is harmless
             raise LinkError(f"no reply from a Tello at {cfg.host}:{cfg.command_port} within "
-                             f"{2 * cfg.connect_timeout_s:g} s: is this computer on the Tello's Wi-Fi "
-                             "(TELLO-XXXXXX) and the drone switched on?")
+                            f"{2 * cfg.connect_timeout_s:g} s: is this computer on the Tello's Wi-Fi "
+                            "(TELLO-XXXXXX) and the drone switched on?")
         if reply != "ok":
             raise RobotError(f"the device at {cfg.host}:{cfg.command_port} answered {reply!r} to 'command'; "
                              "is it a Tello?")
