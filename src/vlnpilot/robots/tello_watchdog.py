@@ -131,8 +131,9 @@ class LinkWatchdog:
             self._send("land")
             resend = min(self.clock.now() + LAND_RESEND_S, start + self.land_confirm_s)
             while self.clock.now() < resend and not self._closing:
-                if self.port.poll_reply() is not None:
-                    self.report("land", reply="ok", action="the Tello acknowledged the landing")
+                reply = self.port.poll_reply()
+                if reply is not None:
+                    self.report("land", reply=reply, action="a reply after `land`: no emergency")
                     return
                 self.clock.wait_until(min(resend, self.clock.now() + POLL_S), self._wake)
         self._send("emergency")
