@@ -24,6 +24,7 @@ from tello_support import (  # noqa: F401  (loopback_only: the autouse guard)
     rig,
 )
 from vlnpilot.core.errors import RobotHalt
+from vlnpilot.core.exits import LINK_FAULT
 from vlnpilot.core.rundir import Recorder, load_run
 from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
@@ -140,7 +141,7 @@ def test_bad_tello_options_are_one_line_and_exit_2(monkeypatch, capsys, args, wo
     assert code == 2 and words in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
 
 
-def test_the_cli_times_out_on_a_silent_tello_with_one_line_and_exit_2(tmp_path: Path) -> None:
+def test_the_cli_times_out_on_a_silent_tello_with_one_line_and_the_link_fault_code(tmp_path: Path) -> None:
     silent = free_udp_port()
     settings = tmp_path / "tello.yaml"
     settings.write_text(f"command_port: {silent}\nlocal_port: {free_udp_port('')}\nstate_port: {free_udp_port('')}\n"
@@ -149,7 +150,7 @@ def test_the_cli_times_out_on_a_silent_tello_with_one_line_and_exit_2(tmp_path: 
     proc = subprocess.run([sys.executable, "-m", "vlnpilot.cli", "run", "Go to the bedroom", "--robot", "tello",
                            "--tello-host", "127.0.0.1", "--pilot", "stdin", "--out", str(tmp_path / "run")],
                           capture_output=True, text=True, env=env, stdin=subprocess.DEVNULL, timeout=120)
-    assert proc.returncode == 2, proc.stderr
+    assert proc.returncode == LINK_FAULT, proc.stderr  # a link fault, not bad input (2)
     assert proc.stderr.strip().splitlines() == [
         f"error: no reply from a Tello at 127.0.0.1:{silent} within 0.6 s: is this computer on the Tello's Wi-Fi "
         "(TELLO-XXXXXX) and the drone switched on?"]

@@ -123,8 +123,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
-    Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 2 for bad input,
-    130 when interrupted."""
+    Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 4 when the robot's
+    link failed (link_lost), 2 for bad input, 130 when interrupted."""
     from vlnpilot.core.environment import check_capabilities
     from vlnpilot.core.exits import check_base_url, exit_code_for
     from vlnpilot.core.rundir import claim_run_dir, default_run_dir
@@ -331,6 +331,8 @@ def tello_emulator(scene: SceneOpt = "cabin",
                    video_port: Annotated[int, typer.Option("--video-port", min=1, max=65535)] = 11111,
                    battery: Annotated[float, typer.Option("--battery", min=0, max=100, help="Start %.")] = 100.0,
                    drop_replies: Annotated[float, typer.Option("--drop-replies", min=0, max=0.99)] = 0.0,
+                   drop_seed: Annotated[int, typer.Option("--drop-seed", min=0, help="Seed of which replies are "
+                                                          "dropped (the same seed drops the same ones).")] = 0,
                    video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
                    ) -> None:
     """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
@@ -342,7 +344,7 @@ def tello_emulator(scene: SceneOpt = "cabin",
     if spawn is not None:
         sc.spawn(spawn)  # validate: one line listing the spawns
     config = EmulatorConfig(host=host, port=port, state_port=state_port, video_port=video_port, battery_pct=battery,
-                            drop_replies=drop_replies, video_delay_s=video_delay)
+                            drop_replies=drop_replies, video_delay_s=video_delay, seed=drop_seed)
     serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 
@@ -368,15 +370,18 @@ def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
 def main() -> None:
     """Entry point: bad input becomes one clear line on stderr and exit code 2, never a traceback.
 
-    Exit codes (vlnpilot.core.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 130 interrupted.
+    Exit codes (vlnpilot.core.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 4 robot link fault,
+    130 interrupted.
     """
     # click's exception module, wherever this Typer keeps it (Typer >= 0.20 vendors click as typer._click)
     click_errors = sys.modules[typer.BadParameter.__module__]
     try:
         code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
     except VLNPilotError as exc:
+        from vlnpilot.core.exits import error_exit_code
+
         _one_line_error(str(exc))
-        sys.exit(2)
+        sys.exit(error_exit_code(exc))
     except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:  # a bare `vln-pilot`: the help, as before
         exc.show()
         sys.exit(exc.exit_code)

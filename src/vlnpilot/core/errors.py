@@ -31,9 +31,23 @@ class RenderBackendError(VLNPilotError, RuntimeError):
 class RobotHalt(VLNPilotError):
     """A real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move).
 
-    Carries the last observation and whether the drone has landed or still hovers, waiting for the operator.
+    Carries the last observation, whether the drone has landed (or was told to) or still hovers, waiting for the
+    operator, and whether the step's command was carried out: only with evidence (a reply, a state change), so a
+    move refused, never sent or unconfirmed is not recorded as executed. `outcome` is the episode's outcome.
     """
 
-    def __init__(self, reason: str, observation: object = None, *, landed: bool = True):
+    outcome = "halted"
+
+    def __init__(self, reason: str, observation: object = None, *, landed: bool = True, executed: bool = False):
         super().__init__(reason)
-        self.observation, self.landed = observation, landed
+        self.observation, self.landed, self.executed = observation, landed, executed
+
+
+class LinkFault(VLNPilotError):
+    """The link to a robot failed: no reply, no state packets, no video, or it died in flight (its own exit code)."""
+
+
+class LinkLost(RobotHalt, LinkFault):
+    """The link died in flight (state packets, video and replies all silent): `land` was sent, the episode ends."""
+
+    outcome = "link_lost"

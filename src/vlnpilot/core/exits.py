@@ -3,6 +3,8 @@
     0    an episode (or every episode of a bench) was flown to an outcome: success, collision, step limit...
     2    bad input: one line on stderr names the problem and the valid choices
     3    a pilot or provider failure: an episode ended in `pilot_error` (a rejected key, an unknown model...)
+    4    a robot's link failed: no reply at start-up (vlnpilot.core.errors.LinkFault), or an episode ended in
+         `link_lost` (the Tello's state packets, video and replies went silent in flight; `land` was sent)
     130  interrupted (Ctrl-C or SIGTERM); what was recorded is kept and summary.json says "interrupted"
 """
 
@@ -11,17 +13,26 @@ from __future__ import annotations
 from collections.abc import Iterable
 from urllib.parse import urlsplit
 
-from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.errors import ConfigError, LinkFault
 
 OK = 0
 BAD_INPUT = 2
 PILOT_ERROR = 3
+LINK_FAULT = 4
 INTERRUPTED = 130
 
 
 def exit_code_for(outcomes: Iterable[str]) -> int:
-    """PILOT_ERROR when any episode ended in `pilot_error`, else OK."""
-    return PILOT_ERROR if any(o == "pilot_error" for o in outcomes) else OK
+    """LINK_FAULT when any episode ended in `link_lost`, else PILOT_ERROR when any ended in `pilot_error`, else OK."""
+    seen = set(outcomes)
+    if "link_lost" in seen:
+        return LINK_FAULT
+    return PILOT_ERROR if "pilot_error" in seen else OK
+
+
+def error_exit_code(error: Exception) -> int:
+    """The exit code of an error the command line reports in one line: a link fault has its own, the rest is input."""
+    return LINK_FAULT if isinstance(error, LinkFault) else BAD_INPUT
 
 
 def check_base_url(url: str | None, option: str = "--base-url") -> str | None:

@@ -86,6 +86,9 @@ class Observation:
     step: int = 0
     contact_part: str | None = None  # which part of the drone touched it, e.g. 'prop_front_left'
     info: dict[str, Any] = field(default_factory=dict, compare=False)  # robot facts to record (frame age, battery)
+    # False: the robot found that the step's command did not happen (a rotation whose reply was lost and whose
+    # yaw did not change): the step is recorded with nothing executed.
+    executed: bool = field(default=True, compare=False)
 
 
 @runtime_checkable

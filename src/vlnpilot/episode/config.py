@@ -19,8 +19,9 @@ from vlnpilot.tasks.task import SuccessConfig, Task
 
 __all__ = ["OUTCOMES", "EpisodeConfig", "Gate", "JudgeOutcome", "LoopControl"]
 
-# halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move)
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "aborted")
+# halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move);
+# link_lost: a real robot's link died in flight (its watchdog sent `land`; nothing after it counts as executed)
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "link_lost", "aborted")
 JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
 
 

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from vlnpilot.core.commands import HOVER, Command, get_command
-from vlnpilot.core.environment import Environment, GroundTruth, ground_truth_of
+from vlnpilot.core.environment import Environment, GroundTruth, capabilities_of, ground_truth_of
 from vlnpilot.core.errors import ConfigError, RobotHalt
 from vlnpilot.core.fsm import FINAL_STATES, State, parse_state
 from vlnpilot.core.records import Observation, Pose
@@ -82,9 +82,10 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     truth (a real robot) a final state is a success as declared, unless `judge_outcome` (the operator) rules."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
     pilot = as_base_pilot(pilot)  # its traits and hooks, declared (a bare-protocol pilot is adapted once, here)
+    safety = _preflight(env, pilot, config)  # on the ground: a real drone takes off in reset
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
-    safety, measures, recording, asker = _start(env, pilot, task, config, obs, recorder, on_step, spawn, pilot_spec)
+    measures, recording, asker = _start(env, pilot, task, config, obs, safety, recorder, on_step, spawn, pilot_spec)
     state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
     for step in range(1, config.max_steps + 1):
         gate = control.before_step(step)
@@ -98,12 +99,12 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
             _unexecuted(step, state, answer, obs, measures, recording)
             break
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
-        pose_before, (obs, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
-        measures.update(StepFacts(tuple(answer.usages), answer.valid, verdict.command, pose_before, obs.pose))
-        recording.step(_flown(step, state, answer, verdict, pose_before, obs, gt, measures, config.profile))
-        asker.flown(step, state, answer, verdict.command, verdict.next_state, verdict.feedback)
+        pose_before, (obs, flown, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
+        measures.update(StepFacts(tuple(answer.usages), answer.valid, flown, pose_before, obs.pose))
+        recording.step(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures, config.profile))
+        asker.flown(step, state, answer, flown or HOVER, verdict.next_state if flown else state, verdict.feedback)
         end = _stopped(halt, obs, answer, asker.failed_streak, config.max_failed_steps)
-        if end is None:  # the FSM moves on; a final state ends the episode, judged
+        if end is None and flown is not None:  # the FSM moves on; a final state ends the episode, judged
             state = verdict.next_state
             end = _judged(task, state, gt, config, judge_outcome) if state in FINAL_STATES else None
         if end is not None:
@@ -116,19 +117,28 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     return result
 
 
+def _preflight(env: Environment, pilot: Pilot, config: EpisodeConfig) -> SafetyLayer:
+    """Every setting that can be checked on the ground, before `reset` (a real drone takes off there): a pilot
+    that needs ground truth the environment does not declare, a shield it cannot serve, and what the pilot
+    itself checks of the episode (a replay refuses another scene or other settings than its recording's)."""
+    if getattr(pilot, "privileged", False) and not capabilities_of(env).ground_truth:
+        _attach_ground_truth(env, pilot)  # raises the one-line refusal
+    safety = make_safety(config.shield, env, env.scene, config.safety)
+    _tell_pilot_the_episode(pilot, env.scene, config)
+    return safety
+
+
 def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, obs: Observation,
-           recorder: Recorder | None, on_step: StepCallback | None, spawn: str | Spawn | None,
-           pilot_spec: str | None) -> tuple[SafetyLayer, Measures, EpisodeRecording, PilotAsker]:
+           safety: SafetyLayer, recorder: Recorder | None, on_step: StepCallback | None, spawn: str | Spawn | None,
+           pilot_spec: str | None) -> tuple[Measures, EpisodeRecording, PilotAsker]:
     """Before the first step: seed the pilot, reset the safety layer and the measures, write the run's header."""
     _reseed(pilot, config.seed)
-    safety = make_safety(config.shield, env, env.scene, config.safety)
     safety.reset(obs)
     measures = Measures(EpisodeStart(env.scene, obs.pose, task, config.success))
     recording = EpisodeRecording(recorder, on_step)
     recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
-    _tell_pilot_the_episode(pilot, env.scene, config)
-    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
+    return measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
 
 
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
@@ -157,24 +167,32 @@ def _proposed(answer: StepAnswer, state: State) -> tuple[Command, State]:
 
 
 def _execute(env: Environment, safety: SafetyLayer, command: Command,
-             before: Observation) -> tuple[Observation, RobotHalt | None]:
-    """Fly `command`. A real robot's safety rule (battery, geofence, lost reply) ends the episode: `halt`."""
+             before: Observation) -> tuple[Observation, Command | None, RobotHalt | None]:
+    """Fly `command`: the observation, the command if it was executed (a real robot says when it was not: a
+    rotation that did not happen, a move refused or unconfirmed), and the halt of a real robot's safety rule
+    (battery, geofence, lost reply, lost link) that ends the episode."""
     halt: RobotHalt | None = None
     try:
         obs = env.step(command)
+        executed = obs.executed
     except RobotHalt as exc:
-        halt = exc
+        halt, executed = exc, exc.executed
         obs = exc.observation if isinstance(exc.observation, Observation) else before
     safety.observe(obs)
-    return obs, halt
+    return obs, command if executed else None, halt
 
 
-def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, pose_before: Pose,
-           obs: Observation, gt: GroundTruth | None, measures: Measures, profile: str) -> StepRecord:
-    """The record of an executed step; `override` says why a command outside the state's moves ran."""
-    override = override_reason(state, profile, verdict.command, not answer.valid, verdict.interventions,
-                               verdict.next_state)
-    return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, verdict.command,
+def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, flown: Command | None,
+           pose_before: Pose, obs: Observation, gt: GroundTruth | None, measures: Measures,
+           profile: str) -> StepRecord:
+    """The record of a step that went to the drone; `override` says why a command outside the state's moves ran.
+    Without `flown` nothing was executed: the step keeps its decision and verdict, no command, no next state."""
+    if flown is None:
+        return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs,
+                          room_true=gt.room() if gt is not None else None, verdict=verdict,
+                          confirmation=answer.confirmation)
+    override = override_reason(state, profile, flown, not answer.valid, verdict.interventions, verdict.next_state)
+    return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, flown,
                       verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
                       override, answer.confirmation)
 
@@ -183,7 +201,7 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
              max_failed_steps: int) -> _End | None:
     """An end after an executed step that is not a final state: a robot's halt, a collision, a failing pilot."""
     if halt is not None:
-        return _End("halted", str(halt))
+        return _End(halt.outcome, str(halt))  # halted, or link_lost
     if obs.collided:
         return _End("collision", f"touched {obs.contact}", contact=obs.contact)
     if not answer.valid and failed_streak >= max_failed_steps:

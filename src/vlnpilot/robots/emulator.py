@@ -4,8 +4,8 @@ It answers commands on UDP 8889 (replying to the sender's address, as the Tello 
 the sender's port 8890 at 10 Hz and streams the front camera as H.264 to port 11111 (`emulator_video`). Every
 accepted motion moves the simulator's drone with its collision sweep. It keeps the Tello's rules: moves of
 20-500 cm only (`forward 10` gets "out of range"), rotations of 1-360°, auto-landing after 15 s without a
-command, a draining battery, and no reply to `rc`. For tests it can drop a fraction of its replies, delay
-the video, and counts every motion it executed.
+command, a draining battery, and no reply to `rc`. For tests it can drop a fraction of its replies (seeded),
+the replies to some commands, or the commands themselves, delay the video, and counts every motion it executed.
 """
 
 from __future__ import annotations
@@ -45,6 +45,8 @@ class EmulatorConfig:
     rc_full_scale_dps: float = 90.0  # yaw rate at rc 100
     drop_replies: float = 0.0  # fraction of command replies never sent
     drop_verbs: tuple[str, ...] = ()  # commands whose replies are always dropped, e.g. ("forward",)
+    drop_first: tuple[str, ...] = ()  # commands whose first reply only is dropped, e.g. ("streamon",)
+    lose_verbs: tuple[str, ...] = ()  # commands lost on the way to the drone: neither executed nor answered
     video_delay_s: float = 0.0
     fps: float = 15.0
     seed: int = 0
@@ -69,6 +71,7 @@ class EmulatorLog:
     received: list[tuple[float, str]] = field(default_factory=list)  # (clock time, command)
     executed: list[str] = field(default_factory=list)  # every motion it carried out, e.g. "forward 50"
     dropped: list[str] = field(default_factory=list)  # commands whose reply it dropped
+    lost: list[str] = field(default_factory=list)  # commands it never received (lose_verbs)
     events: list[str] = field(default_factory=list)  # takeoff, land, auto_land, emergency
 
     def gaps(self, since: float | None = None) -> list[float]:
@@ -98,6 +101,7 @@ class TelloEmulator:
         self.landed = threading.Event()  # set by land, emergency and the auto-land
         self.auto_landed = threading.Event()
         self._rng = random.Random(self.config.seed)
+        self._dropped_once: set[str] = set()
         self._sim_lock = threading.RLock()
         self._state_lock = threading.Lock()
         self._stop = threading.Event()
@@ -159,18 +163,27 @@ class TelloEmulator:
                 return
             text = data.decode("utf-8", "replace").strip()
             self._client = sender[0]
+            verb = text.split()[0].lower() if text else ""
+            if verb in self.config.lose_verbs:
+                self.log.lost.append(text)
+                continue
             reply = self.handle(text)
             if reply is None:
                 continue
-            verb = text.split()[0].lower() if text else ""
-            if verb in self.config.drop_verbs or (
-                    self.config.drop_replies and self._rng.random() < self.config.drop_replies):
+            if self._drops(verb):
                 self.log.dropped.append(text)
                 continue
             try:
                 self.sock.sendto(reply.encode(), sender)
             except OSError:
                 pass
+
+    def _drops(self, verb: str) -> bool:
+        c = self.config
+        if verb in c.drop_first and verb not in self._dropped_once:
+            self._dropped_once.add(verb)
+            return True
+        return verb in c.drop_verbs or bool(c.drop_replies and self._rng.random() < c.drop_replies)
 
     def handle(self, text: str) -> str | None:
         """Execute one SDK command and return the reply (None for `rc`, which the Tello never answers)."""

@@ -2,11 +2,14 @@
 
 Commands: A2/A3 are `forward 25/50`; B/C are `cw`/`ccw` 15, 45, 90; A1, D1 and D2 (10 cm, below the SDK's
 20 cm minimum) are calibrated rc pulses; E sends nothing. A motion is never resent: a rotation whose "ok" is
-lost is judged from the state packet's yaw, a translation whose "ok" is lost ends the episode with the drone
-hovering until the operator says to land. The pose is dead reckoning from the commands, with the yaw from the
-state packet. The Tello senses no contact, so `collided` is None (unknown). Safety: the first Ctrl-C sends
-`land`, the second `emergency`; a low battery, the flight-time limit and the geofence land the drone. Every
-safety event goes to `events` and, if given, one JSON line each in `event_log`.
+lost is judged from the state packet's yaw (one that did not happen is recorded as not executed), a
+translation whose "ok" is lost ends the episode with the drone hovering until the operator says to land. The
+pose is dead reckoning from confirmed commands only (an "ok", or for an rc pulse a state packet after it), with
+the yaw from the state packet. The Tello senses no contact, so `collided` is None (unknown). Safety: the
+first Ctrl-C sends `land`, the second `emergency`; a low battery, the flight-time limit and the geofence land
+the drone; the link watchdog (`tello_watchdog`) lands it when state packets, video and replies all go silent,
+and the episode ends `link_lost`. Every safety event goes to `events` and, if given, one JSON line each in
+`event_log`.
 """
 
 from __future__ import annotations
@@ -22,16 +25,18 @@ import numpy as np
 
 from vlnpilot.core.commands import Command, Kind, get_command
 from vlnpilot.core.environment import Capabilities
-from vlnpilot.core.errors import RobotHalt
+from vlnpilot.core.errors import LinkLost, RobotHalt
 from vlnpilot.core.records import Motion, Observation, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.operator import ConsoleOperator
 from vlnpilot.robots.tello_config import TelloConfig, load_tello_config
-from vlnpilot.robots.tello_link import RobotError, TelloLink
+from vlnpilot.robots.tello_link import LinkError, RobotError, TelloLink
+from vlnpilot.robots.tello_watchdog import LinkWatchdog
 from vlnpilot.scene import Scene, Spawn, load_scene
 
 NO_REAR = np.zeros((1, 1, 3), np.uint8)  # the Tello has no rear camera (recordings skip 1x1 placeholders)
 SDK_MIN_CM = 20
+STREAMON_TRIES = 3  # `streamon` only starts the video: resending it when its reply is lost is safe
 
 
 class TelloEnv:
@@ -41,10 +46,15 @@ class TelloEnv:
 
     def __init__(self, scene: str | Scene = "cabin", config: TelloConfig | None = None, *,
                  clock: Clock | None = None, operator: ConsoleOperator | None = None,
-                 event_log: str | Path | None = None, handle_sigint: bool = True):
+                 event_log: str | Path | None = None, handle_sigint: bool = True, link_clock: Clock | None = None):
         self.scene = load_scene(scene)
         self.config = config or load_tello_config()
         self.clock = clock or WallClock()
+        # The link's packets arrive in real time, so the watchdog judges their silence on the wall clock unless a
+        # test drives it with a clock of its own.
+        self.link_clock = link_clock or WallClock()
+        self.watchdog: LinkWatchdog | None = None
+        self._event_lock = threading.Lock()  # the watchdog reports from its own thread
         self.operator = operator or ConsoleOperator()
         self.event_log = Path(event_log) if event_log else None
         self.handle_sigint = handle_sigint
@@ -73,17 +83,18 @@ class TelloEnv:
         self._connect(link)
         state = link.fresh_state(2.0)
         if not state:
-            raise RobotError(f"the Tello answers but no state packet reaches UDP port {cfg.state_port}; "
-                             "check the firewall")
+            raise LinkError(f"the Tello answers but no state packet reaches UDP port {cfg.state_port}; "
+                            "check the firewall")
         battery = int(state.get("bat", 0))
         if battery < cfg.takeoff_battery_pct:
             self._event("battery_refused", battery_pct=battery)
             raise RobotError(f"the Tello's battery is at {battery} %, below the take-off floor of "
                              f"{cfg.takeoff_battery_pct} %: charge it before flying")
-        if link.send("streamon", cfg.connect_timeout_s) != "ok":
-            raise RobotError("the Tello did not start its video stream (streamon); update its firmware")
-        self.streaming = True
+        self._stream_on(link)
         link.start_video()
+        self.watchdog = LinkWatchdog(link, self.link_clock, silence_s=cfg.link_silence_s,
+                                     land_confirm_s=cfg.land_confirm_s, report=self._event)
+        self.watchdog.start()  # from take-off on, a dead link lands the drone
         self._takeoff(link)
         self._event("takeoff", battery_pct=battery)
         self._reach_height(link)
@@ -95,25 +106,23 @@ class TelloEnv:
 
     def step(self, command: Command | str) -> Observation:
         cmd = command if isinstance(command, Command) else get_command(command)
+        self._check_link()  # a link found dead while the pilot thought: nothing is sent
         self._check_limits()
-        cal = self.config.calibration
+        executed = True
         if cmd.is_rotation:
-            self._rotate(cmd)
+            executed = self._rotate(cmd)
         elif cmd.kind is Kind.FORWARD and cmd.amount * 100 >= SDK_MIN_CM:
             self._translate(f"forward {round(cmd.amount * 100)}", cmd.motion())
-        elif cmd.kind is not Kind.NONE:  # A1, D1, D2: rc pulses (rc's first channel is right +)
-            pulse = {Kind.FORWARD: cal.forward_10cm, Kind.LATERAL_LEFT: cal.left_10cm,
-                     Kind.LATERAL_RIGHT: cal.right_10cm}[cmd.kind]
-            lr = {Kind.LATERAL_LEFT: -pulse.speed, Kind.LATERAL_RIGHT: pulse.speed}.get(cmd.kind, 0)
-            self.link.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
-            self._pose = cmd.motion().apply(self._pose)
+        elif cmd.kind is not Kind.NONE:
+            self._pulse(cmd)
         self._step += 1
         self._update_attitude()
-        obs = self._observe(time.monotonic())
+        obs = self._observe(time.monotonic(), executed)
+        self._check_link(executed, obs)  # the move was confirmed, but no fresh frame will show it
         away = self._pose.distance_xy(self._home)
         if away > self.config.geofence_m:
             self._land_and_halt(f"dead reckoning puts the drone {away:.1f} m from take-off, past the geofence of "
-                                f"{self.config.geofence_m:g} m", "geofence", obs)
+                                f"{self.config.geofence_m:g} m", "geofence", obs, executed=True)
         return obs
 
     # -- start-up ----------------------------------------------------------------------------------------------
@@ -121,22 +130,44 @@ class TelloEnv:
         cfg = self.config
         reply = link.send("command", cfg.connect_timeout_s) or link.send("command", cfg.connect_timeout_s)
         if reply is None:  # "command" only enters SDK mode: asking twice is harmless
-            raise RobotError(f"no reply from a Tello at {cfg.host}:{cfg.command_port} within "
-                             f"{2 * cfg.connect_timeout_s:g} s: is this computer on the Tello's Wi-Fi "
-                             "(TELLO-XXXXXX) and the drone switched on?")
+            raise LinkError(f"no reply from a Tello at {cfg.host}:{cfg.command_port} within "
+                            f"{2 * cfg.connect_timeout_s:g} s: is this computer on the Tello's Wi-Fi "
+                            "(TELLO-XXXXXX) and the drone switched on?")
         if reply != "ok":
             raise RobotError(f"the device at {cfg.host}:{cfg.command_port} answered {reply!r} to 'command'; "
                              "is it a Tello?")
 
+    def _stream_on(self, link: TelloLink) -> None:
+        """`streamon`, resent while its reply is lost (it only starts the video); a refusal is the firmware's."""
+        timeout = self.config.connect_timeout_s
+        for _ in range(STREAMON_TRIES):
+            reply = link.send("streamon", timeout)
+            if reply is not None:
+                break
+            self._event("lost_reply", command="streamon", action="resent (it only starts the video)")
+        else:
+            raise LinkError(f"no reply to 'streamon' in {STREAMON_TRIES} tries of {timeout:g} s: the link loses "
+                            "the Tello's replies; move closer to the drone or away from other Wi-Fi")
+        if reply != "ok":
+            raise RobotError(f"the Tello refused to start its video stream (streamon: {reply!r}); update its "
+                             "firmware")
+        self.streaming = True
+
     def _takeoff(self, link: TelloLink) -> None:
+        """`takeoff`, its reply awaited `takeoff_timeout_s` (well inside the Tello's 15 s auto-land), else judged
+        from the time-of-flight sensor. From here on `close()` lands the drone whatever happens."""
+        self.flying, self._takeoff_t = True, self.clock.now()
         reply = link.send("takeoff", self.config.takeoff_timeout_s)
         if reply is None:
-            state = link.fresh_state() or {}
+            state = None if link.lost.is_set() else link.fresh_state()
+            if state is None:
+                raise LinkError(f"the link to the Tello died during take-off ({self._lost_reason()}); 'land' sent")
             if int(state.get("tof", 0)) < 30:
-                raise RobotError("no reply to 'takeoff' and the drone is not airborne")
+                raise LinkError(f"no reply to 'takeoff' within {self.config.takeoff_timeout_s:g} s and the drone "
+                                "is not airborne")
+            self._event("lost_reply", command="takeoff", action=f"airborne at {state.get('tof')} cm: flying on")
         elif reply != "ok":
             raise RobotError(f"the Tello refused to take off: {reply}")
-        self.flying, self._takeoff_t = True, self.clock.now()
 
     def _reach_height(self, link: TelloLink) -> None:
         """Climb or descend to the flight height by the time-of-flight sensor (SDK moves of 20 cm or more)."""
@@ -149,7 +180,8 @@ class TelloEnv:
                 self._translate(f"{verb} {min(abs(cm), 500)}", Motion(vertical_m=cm / 100))
             except RobotHalt as halt:
                 self.land()
-                raise RobotError(f"could not reach flight height: {halt}") from None
+                raise (LinkError if isinstance(halt, LinkLost) else RobotError)(
+                    f"could not reach flight height: {halt}") from None
 
     # -- motions (each sent once) ---------------------------------------------------------------------------
     def _translate(self, sdk: str, motion: Motion) -> None:
@@ -159,36 +191,72 @@ class TelloEnv:
             self._pose = motion.apply(self._pose)
             return
         if reply is None:
+            self._confirm_link(f"no reply to '{sdk}'")
             self.awaiting_operator = True
             self._event("lost_reply", command=sdk, action="not resent; hovering until the operator says to land")
             raise RobotHalt(f"no reply to '{sdk}': the move may or may not have happened, so it is not sent again; "
-                            "the drone hovers until the operator says to land", self._observe(time.monotonic()),
+                            "the drone hovers until the operator says to land", self._observe(time.monotonic(), False),
                             landed=False)
         self._land_and_halt(f"the Tello refused '{sdk}': {reply}", "refused")
 
-    def _rotate(self, cmd: Command) -> None:
+    def _rotate(self, cmd: Command) -> bool:
+        """Whether the rotation happened: its "ok", or with the reply lost, the yaw of a state packet after it."""
         verb = "cw" if cmd.kind is Kind.ROTATE_RIGHT else "ccw"
         sdk = f"{verb} {round(cmd.amount)}"
         before = int(self.link.state().get("yaw", 0))
         reply = self.link.send(sdk)
         if reply == "ok":
             self.clock.sleep(self.config.calibration.move_settle_s)
-            return
+            return True
         if reply is not None:
             self._land_and_halt(f"the Tello refused '{sdk}': {reply}", "refused")
-        after = self.link.fresh_state() or self.link.state()
+        after = self._confirm_link(f"no reply to '{sdk}'")
         turned = wrap_deg(int(after.get("yaw", before)) - before)  # Tello yaw grows clockwise
         expected = cmd.amount if verb == "cw" else -cmd.amount
         tol = self.config.calibration.yaw_tolerance_deg
         if abs(wrap_deg(turned - expected)) <= tol:
             self._event("lost_reply", command=sdk, action=f"yaw turned {turned:.0f}°: the rotation happened")
-        elif abs(turned) <= tol:
+            return True
+        if abs(turned) <= tol:
             self._event("lost_reply", command=sdk, action="yaw unchanged: the rotation did not happen; not resent")
-        else:
-            self.awaiting_operator = True
-            self._event("lost_reply", command=sdk, action=f"yaw turned {turned:.0f}° of {expected:.0f}°: unclear")
-            raise RobotHalt(f"no reply to '{sdk}' and the yaw turned {turned:.0f}° of {expected:.0f}°; the drone "
-                            "hovers until the operator says to land", self._observe(time.monotonic()), landed=False)
+            return False
+        self.awaiting_operator = True
+        self._event("lost_reply", command=sdk, action=f"yaw turned {turned:.0f}° of {expected:.0f}°: unclear")
+        raise RobotHalt(f"no reply to '{sdk}' and the yaw turned {turned:.0f}° of {expected:.0f}°; the drone "
+                        "hovers until the operator says to land", self._observe(time.monotonic(), False), landed=False)
+
+    def _pulse(self, cmd: Command) -> None:
+        """A1, D1, D2: a timed rc pulse (rc's first channel is right +). The Tello never answers `rc`, so a
+        state packet after the pulse is the evidence that it went over a live link; only then does the pose move."""
+        cal = self.config.calibration
+        pulse = {Kind.FORWARD: cal.forward_10cm, Kind.LATERAL_LEFT: cal.left_10cm,
+                 Kind.LATERAL_RIGHT: cal.right_10cm}[cmd.kind]
+        lr = {Kind.LATERAL_LEFT: -pulse.speed, Kind.LATERAL_RIGHT: pulse.speed}.get(cmd.kind, 0)
+        self.link.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
+        self._confirm_link(f"the rc pulse of {cmd.code}")
+        self._pose = cmd.motion().apply(self._pose)
+
+    # -- the link ---------------------------------------------------------------------------------------------
+    def _confirm_link(self, what: str) -> dict[str, Any]:
+        """A state packet that arrived after `what`; none within 1.5 s means the link is dead: land, end."""
+        state = None if self.link.lost.is_set() else self.link.fresh_state()
+        if state is None:
+            if self.watchdog is not None:
+                self.watchdog.declare_lost(f"{what} and no state packet after it")
+            self._link_lost(executed=False)
+        return state
+
+    def _check_link(self, executed: bool = False, obs: Observation | None = None) -> None:
+        if self.link is not None and self.link.lost.is_set():
+            self._link_lost(executed, obs)
+
+    def _link_lost(self, executed: bool, obs: Observation | None = None) -> None:
+        self.flying = self.awaiting_operator = False  # the watchdog lands it; nothing else is sent
+        raise LinkLost(f"the link to the Tello is lost ({self._lost_reason()}): 'land' sent, nothing more is "
+                       "executed", obs or self._observe(time.monotonic(), executed), landed=True, executed=executed)
+
+    def _lost_reason(self) -> str:
+        return (self.watchdog.reason if self.watchdog is not None else "") or "no sign of life"
 
     def _update_attitude(self) -> None:
         """Yaw from the state packet (relative to take-off, clockwise), height from the time-of-flight sensor."""
@@ -197,14 +265,15 @@ class TelloEnv:
         z = int(state.get("tof", round(self._pose.z * 100))) / 100
         self._pose = Pose(self._pose.x, self._pose.y, z, yaw)
 
-    def _observe(self, settled_at: float) -> Observation:
+    def _observe(self, settled_at: float, executed: bool = True) -> Observation:
         image, timing = self.link.fresh_frame(settled_at)
         state = self.link.state()
+        with self._event_lock:
+            events, self._unreported = self._unreported, []
         info = {**timing, "battery_pct": state.get("bat"), "tof_cm": state.get("tof"),
-                "keepalives": self.link.keepalives, "events": self._unreported}
-        self._unreported = []
+                "keepalives": self.link.keepalives, "events": events}
         return Observation(front_rgb=image, rear_rgb=NO_REAR, pose=self._pose, collided=None, step=self._step,
-                           info=info)
+                           info=info, executed=executed)
 
     # -- safety -----------------------------------------------------------------------------------------------
     def _check_limits(self) -> None:
@@ -217,13 +286,14 @@ class TelloEnv:
         if flown > cfg.max_flight_s:
             self._land_and_halt(f"{flown:.0f} s of flight passed the limit of {cfg.max_flight_s:g} s", "flight_time")
 
-    def _land_and_halt(self, reason: str, kind: str, obs: Observation | None = None) -> None:
+    def _land_and_halt(self, reason: str, kind: str, obs: Observation | None = None, *,
+                       executed: bool = False) -> None:
         self._event(kind, reason=reason, action="land")
         self.land()
-        raise RobotHalt(reason, obs or self._observe(time.monotonic()), landed=True)
+        raise RobotHalt(reason, obs or self._observe(time.monotonic(), executed), landed=True, executed=executed)
 
     def land(self) -> None:
-        if self.flying and self.link is not None:
+        if self.flying and self.link is not None and not self.link.lost.is_set():  # else the watchdog lands it
             reply = None
             for _ in range(3):  # unlike a move, a repeated `land` is harmless: ask again when the "ok" is lost
                 reply = self.link.send("land")  # the Tello answers once it is down (a few seconds)
@@ -235,11 +305,12 @@ class TelloEnv:
     def _event(self, kind: str, **facts: Any) -> None:
         event = {"event": kind, "t": round(self.clock.now() - self._takeoff_t, 3) if self._takeoff_t else 0.0,
                  **facts}
-        self.events.append(event)
-        self._unreported.append(event)
-        if self.event_log is not None:
-            with open(self.event_log, "a", encoding="utf-8") as f:
-                f.write(json.dumps(event) + "\n")
+        with self._event_lock:
+            self.events.append(event)
+            self._unreported.append(event)
+            if self.event_log is not None:
+                with open(self.event_log, "a", encoding="utf-8") as f:
+                    f.write(json.dumps(event) + "\n")
 
     def _install_sigint(self) -> None:
         if self.handle_sigint and threading.current_thread() is threading.main_thread():
@@ -257,17 +328,21 @@ class TelloEnv:
 
     # -- shutdown ---------------------------------------------------------------------------------------------
     def close(self) -> None:
-        """Land (after the operator's word if a lost reply left the drone hovering), stop the video, let go."""
+        """Land (after the operator's word if a lost reply left the drone hovering), stop the video, let go.
+
+        After a link loss nobody is asked anything: the watchdog's landing sequence is let finish."""
         if self.link is None or self.closed:
             return
         self.closed = True
         try:
-            if self.flying and self.awaiting_operator:
+            if self.flying and self.awaiting_operator and not self.link.lost.is_set():
                 self.operator.wait("The Tello is hovering after a lost reply. Press Enter to land it.")
             self.land()
-            if self.streaming:
+            if self.streaming and not self.link.lost.is_set():
                 self.link.send("streamoff", self.config.connect_timeout_s)
         finally:
+            if self.watchdog is not None:
+                self.watchdog.close()
             self.link.close()
             if self._old_sigint is not None:
                 signal.signal(signal.SIGINT, self._old_sigint)

@@ -46,7 +46,9 @@ class TelloConfig(_Strict):
     video_port: int = Field(11111, ge=1, le=65535)  # and video here
     connect_timeout_s: float = Field(3.0, gt=0)
     reply_timeout_s: float = Field(7.0, gt=0)  # for a motion's "ok" (a 50 cm move takes about 2 s)
-    takeoff_timeout_s: float = Field(20.0, gt=0)
+    # The Tello lands by itself 15 s after its last command: a lost `takeoff` reply is waited on 8 s at most, so
+    # that the state check and the climb that follow still come well inside those 15 s.
+    takeoff_timeout_s: float = Field(8.0, gt=0, le=10)
     frame_timeout_s: float = Field(5.0, gt=0)
     flight_height_m: float | None = None  # None: the scene's flight altitude
     calibration: Calibration
@@ -56,6 +58,8 @@ class TelloConfig(_Strict):
     geofence_m: float = Field(gt=0)
     keepalive_s: float = Field(gt=0, le=10)
     video_latency_s: float = Field(ge=0, le=5)
+    link_silence_s: float = Field(gt=0, le=1.5)  # at most 1.5 s, so that `land` goes out within 2 s of a death
+    land_confirm_s: float = Field(gt=0, le=10)
 
 
 def load_tello_config(path: str | Path | None = None, **overrides: Any) -> TelloConfig:

@@ -6,7 +6,8 @@ own SDK samples do; the Tello answers whichever port asked) and point `address` 
 an emulator on 127.0.0.1:8889 and the controller share one machine without a port clash.
 
 djitellopy's `send_control_command` resends a command whose "ok" was lost, which repeats a move. Here every
-command is sent exactly once (`send`); whoever sends a motion decides what a missing reply means.
+command is sent exactly once (`send`); whoever sends a motion decides what a missing reply means. Once the link
+watchdog (`tello_watchdog`) sets `lost`, nothing is sent but its `land` / `emergency`, and every wait ends.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.errors import LinkFault, VLNPilotError
 from vlnpilot.robots.clock import Clock
 from vlnpilot.robots.tello_config import TelloConfig
 
@@ -27,6 +28,10 @@ MIN_GAP_S = 0.1  # the Tello drops commands sent closer together than this (djit
 
 class RobotError(VLNPilotError):
     """The robot cannot be reached or refuses to start; the message says what to check."""
+
+
+class LinkError(RobotError, LinkFault):
+    """No reply, no state packets or no video: the link is at fault, not the input (its own exit code)."""
 
 
 def _tello_class() -> Any:
@@ -103,6 +108,10 @@ class TelloLink:
         self.keepalives = 0
         self.last_sent = clock.now()
         self._last_reply = 0.0
+        self.replies = 0  # replies received, a sign of life for the watchdog
+        self.lost = threading.Event()  # set by the watchdog: the link is dead
+        self._state_seen: Any = None  # the state packet last counted (held, so a new one cannot reuse its id)
+        self._state_packets = 0
         self.frames: StampedFrames | None = None
         self._stop = threading.Event()
         self._keepalive: threading.Thread | None = None
@@ -114,17 +123,23 @@ class TelloLink:
             return self._send(command, self.config.reply_timeout_s if timeout is None else timeout)
 
     def _send(self, command: str, timeout: float) -> str | None:
-        responses = self.tello.get_own_udp_object()["responses"]
+        if self.lost.is_set():
+            return None
+        responses = self._responses()
         responses.clear()  # a late reply to an earlier command must not pass for this one's
         time.sleep(max(0.0, MIN_GAP_S - (time.monotonic() - self._last_reply)))
         self._raw(command)
         deadline = time.monotonic() + timeout
         while not responses:
-            if time.monotonic() > deadline:
+            if time.monotonic() > deadline or self.lost.is_set():  # a reply after the loss may be the land's
                 return None
             time.sleep(0.005)
         self._last_reply = time.monotonic()
+        self.replies += 1
         return responses.pop(0).decode("utf-8", "replace").strip()
+
+    def _responses(self) -> list[bytes]:
+        return self.tello.get_own_udp_object()["responses"]
 
     def _raw(self, command: str) -> None:
         self.sent.append(command)
@@ -134,6 +149,8 @@ class TelloLink:
     def pulse(self, left_right: int, forward: int, duration_s: float, settle_s: float) -> None:
         """A timed rc velocity pulse, then zero velocity (sent twice: repeating a stop is harmless) and a settle."""
         with self.lock:
+            if self.lost.is_set():
+                return
             self._raw(f"rc {left_right} {forward} 0 0")
             self.clock.sleep(duration_s)
             self._raw("rc 0 0 0 0")
@@ -141,9 +158,21 @@ class TelloLink:
         self.clock.sleep(settle_s)
 
     def emergency_send(self, command: str) -> None:
-        """`land` or `emergency` from a signal handler: bypasses the lock, which a motion may be holding."""
+        """`land` or `emergency` from a signal handler or the watchdog: bypasses the lock, which a motion may hold."""
         self.sent.append(command)
         self.tello.send_command_without_return(command)
+
+    def poll_reply(self) -> str | None:
+        """A reply nobody is waiting for (the watchdog's `land`), or None."""
+        responses = self._responses()
+        return responses.pop(0).decode("utf-8", "replace").strip() if responses else None
+
+    def evidence(self) -> tuple[int, int, int]:
+        """Signs of life so far: state packets, decoded frames, replies (read by the watchdog's thread only)."""
+        state = self.tello.get_current_state()
+        if state is not self._state_seen and state:
+            self._state_seen, self._state_packets = state, self._state_packets + 1
+        return self._state_packets, self.frames.count if self.frames is not None else 0, self.replies
 
     # -- state -------------------------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
@@ -153,7 +182,7 @@ class TelloLink:
         """The first state packet received after this call (djitellopy stores each packet as a new dict)."""
         old = self.tello.get_current_state()
         deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
+        while time.monotonic() < deadline and not self.lost.is_set():
             now = self.tello.get_current_state()
             if now is not old and now:
                 return dict(now)
@@ -167,7 +196,7 @@ class TelloLink:
         try:
             self.frames = StampedFrames(self.tello, self.tello.get_udp_video_address())
         except (TelloException, OSError) as exc:
-            raise RobotError(f"no video from the Tello on UDP port {self.config.video_port} ({exc}); check that no "
+            raise LinkError(f"no video from the Tello on UDP port {self.config.video_port} ({exc}); check that no "
                              "other program reads the stream and that the firewall lets UDP in") from None
 
     def fresh_frame(self, settled_at: float) -> tuple[np.ndarray, dict[str, Any]]:
@@ -186,7 +215,7 @@ class TelloLink:
             if stamp >= wanted and count >= 1:
                 fresh = True
                 break
-            if time.monotonic() > deadline:
+            if time.monotonic() > deadline or self.lost.is_set():
                 fresh = False
                 break
             time.sleep(0.01)
@@ -208,6 +237,8 @@ class TelloLink:
         """`battery?` whenever nothing was sent for `keepalive_s` (older firmware refuses `keepalive`)."""
         try:
             while not self.clock.wait_until(self.last_sent + self.config.keepalive_s, self._stop):
+                if self.lost.is_set():  # after a loss only the watchdog speaks (land, emergency)
+                    break
                 if self.clock.now() < self.last_sent + self.config.keepalive_s:
                     continue
                 if not self.lock.acquire(blocking=False):  # a motion is under way: it is traffic itself

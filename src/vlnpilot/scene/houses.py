@@ -27,6 +27,7 @@ from vlnpilot.scene.validate import HouseInvalid, validate
 PREFIX = "house:"
 MIN_ROOMS, MAX_ROOMS = 2, 6
 MAX_ATTEMPTS = 5
+SEEDS = 10**9  # house:0 ... house:999999999 (nine digits in a scene name)
 FLIGHT_Z = 1.0
 ROOM_TYPES = ("living_room", "kitchen", "bedroom", "bathroom", "study", "hallway")
 # room type -> (display name, aliases, floor-plan colour); a second bedroom is "second bedroom"

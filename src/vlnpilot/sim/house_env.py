@@ -1,8 +1,9 @@
 """Gymnasium environment `VLNPilot/House-v0`: the cabin environment's rules in procedural houses.
 
-`reset(seed=S)` flies house `house:S` (the simulator is rebuilt only when the house changes); without a
-seed the current house is kept. Each episode starts at a random spawn of the house with a random goal room
-(both drawn from the reset seed) unless `options` gives `spawn` / `goal_room`.
+`reset(seed=S)` flies house `house:S` (the simulator is rebuilt only when the house changes); a Gymnasium seed
+beyond the houses' range (0..999999999) flies `house:S mod 10**9`; without a seed the current house is kept.
+Each episode starts at a random spawn of the house with a random goal room (both drawn from the reset seed)
+unless `options` gives `spawn` / `goal_room`.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ import numpy as np
 from gymnasium import spaces
 
 from vlnpilot.core.commands import COMMANDS
-from vlnpilot.scene.houses import HouseSpec
+from vlnpilot.scene.houses import SEEDS, HouseSpec
 from vlnpilot.sim.gym_env import CabinEnv
 
 MAX_EXTENT_M = 40.0  # bound of the pose observation: larger than any generated house
@@ -52,7 +53,7 @@ class HouseEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
         if seed is not None:
-            self._spec = HouseSpec(int(seed), self._spec.rooms)
+            self._spec = HouseSpec(int(seed) % SEEDS, self._spec.rooms)  # any Gymnasium seed names a house
         env, options = self.env, dict(options or {})
         scene = env.scene
         if options.get("spawn") is None:
