@@ -15,6 +15,7 @@ from vlnpilot.errors import ConfigError
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.record import load_run
 from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.success import recorded_success
 from vlnpilot.tasks import Task
 
 TRIALS = Path(__file__).resolve().parents[1] / "trials"
@@ -33,7 +34,8 @@ def replay(sim: Simulator, trial_dir: Path, **overrides):
     summary, _ = load_run(trial_dir)
     cfg = summary["config"]
     recorded = {"max_steps": cfg["max_steps"], "profile": cfg["profile"], "seed": cfg["seed"], "shield": cfg["shield"],
-                "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper")}
+                "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper"),
+                "success": recorded_success(cfg.get("success"))}  # judged by the monitor it was flown under
     config = EpisodeConfig(**{**recorded, **overrides})
     return run_episode(sim, make_pilot(f"replay:{trial_dir}"), Task(**summary["task"]), config,
                        spawn=summary["spawn"])

@@ -8,12 +8,13 @@ Callers read the declaration (`capabilities_of`, `ground_truth_of`, `depth_sensi
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import Protocol, cast, runtime_checkable
+from typing import Any, Protocol, cast, runtime_checkable
 
 import numpy as np
 
 from vlnpilot.commands import Command
 from vlnpilot.errors import ConfigError
+from vlnpilot.ranging import SENSORS, RangeReading, range_sensor
 from vlnpilot.scene.model import Scene, Spawn
 from vlnpilot.types import GroundTruth, MotionSampling, Observation, Pose
 
@@ -28,8 +29,9 @@ class Capabilities:
     depth: bool = False  # a front depth image (depth shield)
     rear_view: bool = False  # the chase camera behind the drone
     contact_sensing: bool = False  # whether `Observation.collided` is known
+    range_sensor: str = "none"  # range sensors it carries (vlnpilot.ranging.SENSORS): a `RangeSensing`
 
-    def to_dict(self) -> dict[str, bool]:
+    def to_dict(self) -> dict[str, Any]:
         return asdict(self)
 
 
@@ -73,6 +75,13 @@ class DepthSensing(MotionSampling, Protocol):
         """The front camera's z-depth image (H x W, metres along the optical axis) at the current pose."""
 
 
+@runtime_checkable
+class RangeSensing(Protocol):
+    """An environment whose `capabilities.range_sensor` is not `none`: its readings at the current pose."""
+
+    def ranges(self) -> tuple[RangeReading, ...]: ...
+
+
 def capabilities_of(env: object) -> Capabilities:
     """An environment's declared capabilities; `UNDECLARED` (nothing) if it declares none."""
     declared = getattr(env, "capabilities", None)
@@ -87,6 +96,21 @@ def ground_truth_of(env: object) -> GroundTruth | None:
 def depth_sensing_of(env: object) -> DepthSensing | None:
     """The environment as a front depth sensor if it declares one, else None."""
     return cast(DepthSensing, env) if capabilities_of(env).depth else None
+
+
+def range_sensing_of(env: object) -> RangeSensing | None:
+    """The environment as a range sensor if it declares one, else None."""
+    return cast(RangeSensing, env) if capabilities_of(env).range_sensor != "none" else None
+
+
+def check_sensors(caps: Capabilities, robot: str, sensors: str | None) -> None:
+    """Refuse `--sensors NAME` when the drone does not carry that sensor (one line naming what is missing)."""
+    wanted = range_sensor(sensors)
+    if wanted is not None and caps.range_sensor != wanted.name:
+        has = caps.range_sensor if caps.range_sensor != "none" else "no range sensor"
+        raise ConfigError(f"--sensors {wanted.name} needs {wanted.shown_as}, which the {robot} does not have "
+                          f"({has}); valid here: none" + (f", {caps.range_sensor}" if caps.range_sensor in SENSORS
+                                                           and caps.range_sensor != "none" else ""))
 
 
 def usable_shields(caps: Capabilities) -> str:

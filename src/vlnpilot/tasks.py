@@ -15,7 +15,7 @@ from vlnpilot.commands import OPPOSITE, Command, Kind
 from vlnpilot.errors import VLNPilotError
 from vlnpilot.fsm import State
 from vlnpilot.scene.model import Scene, _norm
-from vlnpilot.success import DEFAULT_SUCCESS, SuccessConfig
+from vlnpilot.success import DEFAULT_SUCCESS, SuccessConfig, object_view
 from vlnpilot.types import GroundTruth, Pose
 
 
@@ -82,12 +82,8 @@ def judge(task: Task, final_state: State, gt: GroundTruth, config: SuccessConfig
         return ok, f"drone is in {room or 'no room'}; goal room {task.goal_room}"
     if final_state is not State.DESCRIBE_OBJECT:
         return False, f"declared {final_state.value} for an object goal"
-    dist, bearing = gt.target_distance_bearing(task.goal_target)
-    visible = gt.target_visible(task.goal_target)
-    ok = (dist <= config.object_distance_m and abs(bearing) <= config.object_facing_deg
-          and (visible or not config.object_must_be_visible))
-    return ok, (f"{task.goal_target} at {dist:.2f} m (max {config.object_distance_m}), bearing {bearing:+.0f}° "
-                f"(max ±{config.object_facing_deg:.0f}°), {'visible' if visible else 'not visible'}")
+    seen = object_view(gt, task.goal_target, config)
+    return seen.reached(config), seen.reason(task.goal_target, config)
 
 
 def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessConfig = DEFAULT_SUCCESS) -> float:

@@ -91,6 +91,12 @@ class Observation:
     info: dict[str, Any] = field(default_factory=dict, compare=False)  # robot facts to record (frame age, battery)
 
 
+Point2D = tuple[float, float]
+# Where an object stands on the floor, seen from above: convex polygons (x, y corners, counter-clockwise), one per
+# part of the object; the success monitor measures to the nearest of their points.
+Footprint = tuple[tuple[Point2D, ...], ...]
+
+
 @runtime_checkable
 class MotionSampling(Protocol):
     """How an environment checks a motion for contact, so that a shield can predict exactly what it will do."""
@@ -115,6 +121,9 @@ class GroundTruth(MotionSampling, Protocol):
 
     def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
         """Horizontal distance (m) from the drone to the target, and its bearing (deg, + = left of heading)."""
+
+    def target_footprint(self, target_id: str) -> Footprint:
+        """The target's footprint: the outline of each of its parts projected on the floor (world x, y)."""
 
     def target_visible(self, target_id: str) -> bool:
         """Whether the target occupies enough pixels of the front camera (segmentation render)."""

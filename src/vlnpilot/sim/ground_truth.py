@@ -6,7 +6,7 @@ import math
 from typing import TYPE_CHECKING
 
 from vlnpilot.scene import Scene
-from vlnpilot.types import Motion, Pose, wrap_deg
+from vlnpilot.types import Footprint, Motion, Pose, wrap_deg
 
 if TYPE_CHECKING:
     from vlnpilot.sim.simulator import Simulator
@@ -38,6 +38,9 @@ class SimGroundTruth:
         p = self._sim.pose
         dx, dy = t.position[0] - p.x, t.position[1] - p.y
         return math.hypot(dx, dy), wrap_deg(math.degrees(math.atan2(dy, dx)) - p.yaw_deg)
+
+    def target_footprint(self, target_id: str) -> Footprint:
+        return self._sim.target_footprint(target_id)
 
     def target_pixel_fraction(self, target_id: str) -> float:
         key = (self._sim.step_count, self._sim.pose, target_id)

@@ -1,0 +1,97 @@
+"""Range sensors (`--sensors tof|multiranger`) read the scene's geometry: MuJoCo ray casts from the drone's pose,
+checked against distances worked out by hand from the cabin's plan (see tests/test_sim_ground_truth.py): walls,
+furniture and a door leaf, within 1 cm without noise; out of range is "beyond N m", never 8.192 m.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from vlnpilot.environment import Capabilities, check_sensors, range_sensing_of
+from vlnpilot.errors import ConfigError
+from vlnpilot.ranging import SENSORS, RangeReading, range_sensor, readings_text, tof_reading
+from vlnpilot.sim import SimConfig, Simulator, drone
+from vlnpilot.types import Pose
+
+NORTH_FACE_Y = 3.6  # the living room's north wall, inner face
+FRIDGE_FRONT_Y = 2.90  # refrigerator_body: y 2.90..3.58, x 2.08..2.80
+FRIDGE_SIDE_X = 2.80
+LEAF_SOUTH_Y = 1.36  # door_living_bedroom_leaf, open into the living room: y 1.36..1.40, x 3.15..3.93
+FRONT_START = drone.LENGTH / 2 + 0.002  # the front beam leaves at the camera's lens
+SIDE_START = drone.WIDTH / 2
+NORTH, EAST, WEST = 90.0, 0.0, 180.0
+CM = 0.01
+
+
+@pytest.fixture(scope="module")
+def exact():
+    with Simulator("cabin", SimConfig(render=False, sensors="multiranger", range_noise=False)) as sim:
+        yield sim
+
+
+def _read(sim: Simulator, pose: Pose) -> dict[str, float | None]:
+    sim.reset(pose)
+    return {r.direction: r.metres for r in sim.ranges()}
+
+
+@pytest.mark.parametrize(("what", "pose", "expected"), [
+    ("wall", Pose(3.0, 3.0, 1.0, NORTH), NORTH_FACE_Y - 3.0 - FRONT_START),
+    ("wall, near", Pose(3.0, 3.4, 1.0, NORTH), NORTH_FACE_Y - 3.4 - FRONT_START),
+    ("fridge front", Pose(2.44, 2.2, 1.0, NORTH), FRIDGE_FRONT_Y - 2.2 - FRONT_START),
+    ("fridge side", Pose(3.4, 3.2, 1.0, WEST), 3.4 - FRIDGE_SIDE_X - FRONT_START),
+    ("door leaf", Pose(3.5, 0.9, 1.0, NORTH), LEAF_SOUTH_Y - 0.9 - FRONT_START),
+])
+def test_front_range_agrees_with_the_geometry(exact: Simulator, what: str, pose: Pose, expected: float) -> None:
+    assert _read(exact, pose)["front"] == pytest.approx(expected, abs=CM), what
+
+
+def test_side_back_and_up_ranges_agree_with_the_geometry(exact: Simulator) -> None:
+    got = _read(exact, Pose(3.0, 3.2, 1.0, EAST))  # facing east: the north wall on the left, the fridge behind
+    assert got["left"] == pytest.approx(NORTH_FACE_Y - 3.2 - SIDE_START, abs=CM)
+    assert got["back"] == pytest.approx(3.0 - drone.LENGTH / 2 - FRIDGE_SIDE_X, abs=CM)
+    assert got["up"] == pytest.approx(exact.scene.ceiling_height - 1.0 - drone.HEIGHT / 2, abs=CM)
+    assert got["right"] is not None and got["right"] > 1.0  # the open living room (the drone's own geoms ignored)
+
+
+def test_tof_has_one_beam_and_a_short_range(exact: Simulator) -> None:
+    with Simulator("cabin", SimConfig(render=False, sensors="tof", range_noise=False)) as sim:
+        sim.reset(Pose(2.0, 1.8, 1.0, NORTH))  # the fridge is 1.1 m ahead-right, the wall 1.75 m ahead
+        (reading,) = sim.ranges()
+        assert reading == RangeReading("front", None, 1.2)
+        assert reading.text() == "beyond 1.2 m"
+        assert sim.capabilities.range_sensor == "tof" and range_sensing_of(sim) is sim
+
+
+def test_noise_is_seeded_and_of_the_modelled_size() -> None:
+    tof = SENSORS["tof"]
+    with Simulator("cabin", SimConfig(render=False, sensors="tof")) as sim:
+        runs = []
+        for _ in range(2):
+            sim.reset(Pose(3.0, 2.6, 1.0, NORTH), seed=5)
+            runs.append([sim.ranges()[0].metres for _ in range(40)])
+    true = NORTH_FACE_Y - 2.6 - FRONT_START
+    assert runs[0] == runs[1]  # the same seed, the same readings
+    errors = [r - true for r in runs[0]]
+    assert max(abs(e) for e in errors) < 4 * tof.sigma(true) and len(set(runs[0])) > 30
+
+
+def test_the_tello_answer_is_read_in_mm_and_8192_is_beyond_range() -> None:
+    tof = SENSORS["tof"]
+    assert tof_reading("tof 523", tof) == RangeReading("front", 0.523, 1.2)
+    assert tof_reading("tof 8192", tof).text() == "beyond 1.2 m"
+    assert readings_text((tof_reading("tof 8192", tof),)) == "front beyond 1.2 m"
+    with pytest.raises(ValueError, match="unreadable"):
+        tof_reading("error", tof)
+
+
+def test_a_drone_without_the_sensor_is_refused_in_one_line() -> None:
+    with pytest.raises(ConfigError, match="valid: none, tof, multiranger"):
+        range_sensor("lidar")
+    with pytest.raises(ConfigError, match=r"--sensors tof needs a forward time-of-flight.*Tello does not have"):
+        check_sensors(Capabilities(), "Tello", "tof")
+    check_sensors(Capabilities(range_sensor="tof"), "Tello", "tof")
+    check_sensors(Capabilities(), "Tello", "none")
+    with pytest.raises(ConfigError, match="--sensors"):
+        SimConfig(sensors="sonar")
+    with Simulator("cabin", SimConfig(render=False)) as plain:
+        assert plain.ranges() == () and range_sensing_of(plain) is None
