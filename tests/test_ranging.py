@@ -87,11 +87,56 @@ def test_the_tello_answer_is_read_in_mm_and_8192_is_beyond_range() -> None:
 def test_a_drone_without_the_sensor_is_refused_in_one_line() -> None:
     with pytest.raises(ConfigError, match="valid: none, tof, multiranger"):
         range_sensor("lidar")
-    with pytest.raises(ConfigError, match=r"--sensors tof needs a forward time-of-flight.*Tello does not have"):
-        check_sensors(Capabilities(), "Tello", "tof")
+    with pytest.raises(ConfigError, match=r"--sensors tof needs one forward time-of-flight beam.*Tello does not have"):
+        check_sensors(Capabilities(), "Tello", "tof")  # the plain Tello
     check_sensors(Capabilities(range_sensor="tof"), "Tello", "tof")
     check_sensors(Capabilities(), "Tello", "none")
     with pytest.raises(ConfigError, match="--sensors"):
         SimConfig(sensors="sonar")
     with Simulator("cabin", SimConfig(render=False)) as plain:
         assert plain.ranges() == () and range_sensing_of(plain) is None
+
+
+def _fly(sensors: str, context: str, query: str = "Find the refrigerator") -> tuple[list[tuple[str, ...]], list[dict]]:
+    from vlnpilot.episode import EpisodeConfig, run_episode
+    from vlnpilot.pilots.oracle import OraclePilot
+    from vlnpilot.tasks import parse_query
+
+    told: list[tuple[str, ...]] = []
+
+    class Listening(OraclePilot):
+        def decide(self, pilot_input):
+            told.append(pilot_input.context)
+            return super().decide(pilot_input)
+
+    records: list[dict] = []
+    with Simulator("cabin", SimConfig(render=False, sensors=sensors, range_noise=False)) as sim:
+        result = run_episode(sim, Listening(), parse_query(query, sim.scene), EpisodeConfig(context=context),
+                             spawn="living_room", on_step=records.append)
+    assert result.outcome == "success"
+    return told, records
+
+
+def test_the_plus_context_states_the_readings_and_the_rule_in_range_terms() -> None:
+    told, records = _fly("tof", "plus")
+    assert all(lines[0].startswith("Range sensor (one forward time-of-flight beam") for lines in told)
+    assert "front beyond 1.2 m" in told[0][0] and "a front reading of 0.95 m on the object itself" in told[0][0]
+    said = " ".join(lines[0] for lines in told)
+    assert all(f"front {r['ranges']['front']['m']:.2f} m" in said for r in records if r["ranges"]["front"]["m"])
+    reach = [lines for lines, r in zip(told, records, strict=False) if r["state"] == "Reach Object"]
+    assert reach and all(any("front range reads 0.9 m or less" in line for line in lines) for lines in reach)
+    assert records[0]["ranges"] == {"front": {"m": None, "max_m": 1.2}}  # recorded per step, beyond range as None
+
+
+def test_a_pilot_is_told_only_what_its_drone_has() -> None:
+    told, records = _fly("none", "plus")
+    assert not any("Range sensor" in line for lines in told for line in lines) and "ranges" not in records[0]
+    told, records = _fly("tof", "paper")  # the paper context tells nothing beyond the paper's inputs
+    assert all(lines == () for lines in told) and "ranges" in records[0]
+
+
+def test_a_low_object_is_left_to_the_width_rule() -> None:
+    from vlnpilot.success import range_rule
+
+    assert "judge it by Reach Object's width rule" in range_rule("bed_1")
+    assert "0.9 m or less" in range_rule("wardrobe_2")

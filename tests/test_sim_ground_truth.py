@@ -107,7 +107,7 @@ def test_target_footprint_by_hand(geo_sim, gt):
     """The fridge's body spans x 2.08..2.80, y 2.90..3.58 (refrigerator_body), the strip of its door gap is 3 mm
     proud of it (y 2.894) and its handles reach y 2.85: the monitor measures to the nearest corner of the door gap
     and counts the heading that passes 2.6 deg beside the body's far corner."""
-    from vlnpilot.success import footprint_distance, footprint_off_heading_deg
+    from vlnpilot.footprint import footprint_distance, footprint_off_heading_deg
 
     footprint = gt.target_footprint("refrigerator")
     xs = [x for poly in footprint for x, _ in poly]

@@ -19,6 +19,8 @@ from typing import Any
 from vlnpilot.commands import Command
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fsm import State
+from vlnpilot.ranging import RangeReading, RangeSensor, readings_text
+from vlnpilot.success import range_meaning, range_rule
 
 CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends the episode and cannot be undone. "
                 "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "
@@ -39,6 +41,7 @@ class ContextConfig:
     budget: bool = False  # steps used and left
     memory: int = 0  # the pilot's own last N decisions (state, move, next state, room, description)
     confirm_final: bool = False  # ask once more, with a warning, before a final state is accepted
+    ranges: bool = False  # the drone's range readings, in metres, and the stop rule in their terms (if it has any)
 
     def __post_init__(self) -> None:
         if not isinstance(self.memory, int) or not 0 <= self.memory <= 10:
@@ -54,7 +57,7 @@ class ContextConfig:
 
 CONTEXT_PRESETS: dict[str, ContextConfig] = {
     "paper": ContextConfig(),
-    "plus": ContextConfig(odometry=True, budget=True, memory=4, confirm_final=True),
+    "plus": ContextConfig(odometry=True, budget=True, memory=4, confirm_final=True, ranges=True),
 }
 
 
@@ -100,8 +103,10 @@ class Travel:
 class PilotContext:
     """Tracks the episode for the context items and renders them as lines of the step prompt."""
 
-    def __init__(self, config: ContextConfig, max_steps: int):
+    def __init__(self, config: ContextConfig, max_steps: int, sensor: RangeSensor | None = None,
+                 goal_target: str | None = None):
         self.config, self.max_steps = config, max_steps
+        self.sensor, self.goal_target = sensor, goal_target  # a pilot is told only of the sensors its drone has
         self._in_state = Travel()
         self._since_door: Travel | None = None  # None until the first Go Through Door
         self._memory: deque[str] = deque(maxlen=config.memory)
@@ -120,9 +125,14 @@ class PilotContext:
             self._memory.append(f"step {step}: in {state.value}, you chose {decision.movement}{changed} -> "
                                 f"{next_state.value}; room {decision.room}; you saw: {_short(decision.description)}")
 
-    def lines(self, step: int) -> tuple[str, ...]:
+    def lines(self, step: int, state: State | None = None, readings: tuple[RangeReading, ...] = ()) -> tuple[str, ...]:
         """The context lines of this step's prompt (empty for the paper context)."""
         c, out = self.config, []
+        if c.ranges and self.sensor is not None and readings:
+            out.append(f"Range sensor ({self.sensor.shown_as}), now: {readings_text(readings)}. "
+                       f"{range_meaning(self.sensor)}")
+            if self.goal_target and "front" in self.sensor.directions and state in _OBJECT_STATES:
+                out.append(range_rule(self.goal_target))
         if c.budget:
             out.append(f"Step budget: this is step {step} of {self.max_steps}; {self.max_steps - step} steps "
                        "remain after this one.")
@@ -138,6 +148,9 @@ class PilotContext:
             out.append("Your last decisions, oldest first:")
             out += [f"  {m}" for m in self._memory]
         return tuple(out)
+
+
+_OBJECT_STATES = (State.SEARCH_OBJECT, State.REACH_OBJECT)
 
 
 def confirmation_note(state: State) -> str:

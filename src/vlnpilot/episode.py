@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 from vlnpilot.commands import HOVER, Command, get_command
 from vlnpilot.context import ContextConfig, context_preset
-from vlnpilot.environment import Environment, ground_truth_of
+from vlnpilot.environment import Environment, capabilities_of, ground_truth_of, range_sensing_of
 from vlnpilot.episode_ask import PilotAsker, StepAnswer
 from vlnpilot.episode_measures import EpisodeEnd, EpisodeResult, EpisodeStart, Measures, StepFacts, result_type
 from vlnpilot.episode_record import EpisodeRecording, StepCallback, StepRecord
@@ -31,6 +31,7 @@ from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
 from vlnpilot.overrides import override_reason
 from vlnpilot.pilots.base import Pilot
+from vlnpilot.ranging import range_sensor
 from vlnpilot.record import Recorder
 from vlnpilot.safety import OVERLAYS, SHIELDS, SafetyConfig, SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
@@ -180,7 +181,9 @@ def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, ob
     recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
     _tell_pilot_the_episode(pilot, env.scene, config)
-    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
+    sensor = range_sensor(capabilities_of(env).range_sensor)
+    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map(),
+                                                   range_sensing_of(env), sensor)
 
 
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
@@ -188,7 +191,7 @@ def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, m
     """A step that ends the episode before anything is executed still costs its calls and is recorded."""
     measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose))
     recording.step(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
-                              confirmation=answer.confirmation))
+                              confirmation=answer.confirmation, ranges=answer.ranges))
 
 
 def _not_to_execute(control: LoopControl, answer: StepAnswer) -> _End | None:
@@ -228,7 +231,7 @@ def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, 
                                verdict.next_state)
     return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, verdict.command,
                       verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
-                      override, answer.confirmation)
+                      override, answer.confirmation, ranges=answer.ranges)
 
 
 def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, failed_streak: int,

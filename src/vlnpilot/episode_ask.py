@@ -17,10 +17,12 @@ from typing import TYPE_CHECKING, Any
 from vlnpilot.commands import Command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
+from vlnpilot.environment import RangeSensing
 from vlnpilot.fsm import FINAL_STATES, State, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Pilot, PilotError
+from vlnpilot.ranging import RangeReading, RangeSensor
 from vlnpilot.safety import draw_corridor
 from vlnpilot.tasks import Task
 from vlnpilot.types import Observation
@@ -104,6 +106,7 @@ class StepAnswer:
     confirmation: dict[str, Any] | None = None
     fatal: bool = False
     usages: list[Usage] = field(default_factory=list)
+    ranges: tuple[RangeReading, ...] = ()  # the range readings the pilot was told this step (before the move)
 
     @property
     def valid(self) -> bool:
@@ -119,11 +122,13 @@ def needs_confirmation(context: ContextConfig, decision: Decision | None, asked:
 class PilotAsker:
     """Asks the episode's pilot (or a person taking a step over) and remembers what the next prompt needs."""
 
-    def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any):
+    def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any,
+                 sensing: RangeSensing | None = None, sensor: RangeSensor | None = None):
         self.pilot, self.task, self.config, self.topo = pilot, task, config, topological_map
         bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
-        self.context = PilotContext(config.context, config.max_steps)
+        self.sensing = sensing  # the drone's range sensors, read once per step
+        self.context = PilotContext(config.context, config.max_steps, sensor, task.goal_target)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
         self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)
@@ -137,7 +142,8 @@ class PilotAsker:
         feedback = list(self.notes)
         image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
         step_end = time.monotonic() + (config.step_deadline_s or 0.0)
-        context_lines = self.context.lines(step)
+        out.ranges = self.sensing.ranges() if self.sensing is not None else ()
+        context_lines = self.context.lines(step, state, out.ranges)
         attempt, reasks = 0, 0
         while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=self.task.query, topological_map=self.topo, state=state,

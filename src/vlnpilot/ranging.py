@@ -9,7 +9,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from vlnpilot.errors import ConfigError
+from vlnpilot.tello_spec import LENGTH
 
+FRONT_BEAM_START_M = LENGTH / 2 + 0.002  # the front beam leaves at the camera's lens, ahead of the drone's centre
 TT_TOF_BEYOND_MM = 8192  # what the RoboMaster TT answers to `EXT tof?` when nothing is within range (SDK 3.0 guide)
 
 
@@ -34,11 +36,11 @@ SENSORS: dict[str, RangeSensor | None] = {
     # The RoboMaster TT's open-source controller: one ToF beam forward at the camera (VL53L0X class, default mode:
     # reliable to 1.2 m, +-3 %).
     "tof": RangeSensor("tof", ("front",), 0.03, 1.2, 0.03, 0.005,
-                       "a forward time-of-flight range sensor beside the camera (RoboMaster TT)"),
+                       "one forward time-of-flight beam beside the camera, as on the RoboMaster TT"),
     # The Crazyflie Multi-ranger deck: five VL53L1x beams, 0.04 to 4 m, a few millimetres of noise.
     "multiranger": RangeSensor("multiranger", ("front", "left", "right", "back", "up"), 0.04, 4.0, 0.0, 0.005,
-                               "five time-of-flight range sensors: front, left, right, back and up (Crazyflie "
-                               "Multi-ranger deck)"),
+                               "five time-of-flight beams, front, left, right, back and up, as the Crazyflie "
+                               "Multi-ranger deck"),
 }
 
 

@@ -7,14 +7,15 @@ and `tests/test_calibration.py` renders the scene to check that they still separ
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
 from vlnpilot.commands import COMMANDS
 from vlnpilot.errors import ConfigError
+from vlnpilot.footprint import footprint_distance, footprint_off_heading_deg
+from vlnpilot.ranging import FRONT_BEAM_START_M, RangeSensor
 from vlnpilot.scene.model import target_kind
-from vlnpilot.types import Footprint, GroundTruth, Pose, wrap_deg
+from vlnpilot.types import GroundTruth
 
 # What the object-goal monitor measures to. `footprint` (issue 23): the nearest point of the object's footprint,
 # and any part of it within the facing angle, so that a drone looking at one end of a bed from 0.8 m succeeds.
@@ -44,46 +45,6 @@ def recorded_success(recorded: dict[str, Any] | None) -> SuccessConfig:
     """The monitor a run was recorded under (its summary's `config.success`): without `object_measured_to` it was
     the point monitor, the only one there was."""
     return SuccessConfig(**{"object_measured_to": "point", **(recorded or {})})
-
-
-# -- the footprint monitor's geometry -------------------------------------------------------------------------
-def _inside(x: float, y: float, poly: tuple[tuple[float, float], ...]) -> bool:
-    """Inside a convex counter-clockwise polygon (of at least three corners)?"""
-    return len(poly) >= 3 and all((bx - ax) * (y - ay) - (by - ay) * (x - ax) >= 0
-                                  for (ax, ay), (bx, by) in zip(poly, poly[1:] + poly[:1], strict=True))
-
-
-def _segment_distance(x: float, y: float, a: tuple[float, float], b: tuple[float, float]) -> float:
-    dx, dy = b[0] - a[0], b[1] - a[1]
-    length2 = dx * dx + dy * dy
-    t = 0.0 if length2 == 0 else max(0.0, min(1.0, ((x - a[0]) * dx + (y - a[1]) * dy) / length2))
-    return math.hypot(x - a[0] - t * dx, y - a[1] - t * dy)
-
-
-def footprint_distance(pose: Pose, footprint: Footprint) -> float:
-    """Horizontal distance from the drone to the nearest point of the footprint (0 above it)."""
-    best = math.inf
-    for poly in footprint:
-        if _inside(pose.x, pose.y, poly):
-            return 0.0
-        best = min(best, *(_segment_distance(pose.x, pose.y, a, b) for a, b in zip(poly, poly[1:] + poly[:1],
-                                                                                   strict=True)))
-    return best
-
-
-def footprint_off_heading_deg(pose: Pose, footprint: Footprint) -> float:
-    """The smallest angle between the heading and a point of the footprint (0 when the heading crosses it)."""
-    best = math.inf
-    for poly in footprint:
-        if _inside(pose.x, pose.y, poly):
-            return 0.0
-        bearings = [wrap_deg(math.degrees(math.atan2(y - pose.y, x - pose.x)) - pose.yaw_deg) for x, y in poly]
-        mid = bearings[0]  # a convex polygon outside the drone spans less than 180 degrees: unwrap around a corner
-        unwrapped = [mid + wrap_deg(b - mid) for b in bearings]
-        lo, hi = min(unwrapped), max(unwrapped)
-        best = min(best, 0.0 if lo <= 0.0 <= hi or lo <= 360.0 <= hi or lo <= -360.0 <= hi
-                   else min(abs(wrap_deg(lo)), abs(wrap_deg(hi))))
-    return best
 
 
 @dataclass(frozen=True)
@@ -145,7 +106,7 @@ OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
     FRIDGE_SIZED,
     CloseCue(("shower",), "a shower", 0.80),
     CloseCue(("bookshelf",), "a bookshelf", 0.85),
-    CloseCue(("tv",), "a TV (with the cabinet it stands on)", FILLS_THE_WIDTH),
+    CloseCue(("tv",), "a TV (with the cabinet it stands on)", 0.85),
     CloseCue(("bed", "desk", "wardrobe"), "a bed, a desk, a wardrobe, a sofa or anything wider", FILLS_THE_WIDTH,
              then_m=0.5),
 )
@@ -167,6 +128,35 @@ def _cue_text(cue: CloseCue) -> str:
             "the safety system stops the drone): center its middle and face it squarely before its ends leave the "
             "image, because they tell where its middle is") if cue.then_m else ""
     return f"{cue.shown_as}: the whole width (both its ends outside the image){then}"
+
+
+# The same distance for a drone with a forward range sensor. Its beam leaves the camera straight ahead at flight
+# height, so it meets only objects that reach that height; lower ones (a bed, a desk, a toilet, a sink, a stove)
+# let it pass over to the wall behind or to nothing, and the image must judge them (tests/test_calibration.py casts
+# the beam at every target of the cabins and 12 houses from the front, from 45 degrees and from the side).
+RANGE_STOP_M = 0.9  # the monitor's 1 m less the beam's start ahead of the drone's centre, less noise and a margin
+ON_THE_BEAM = ("refrigerator", "wardrobe", "bookshelf", "shower", "mirror", "plant", "tv")
+
+
+def range_meaning(sensor: RangeSensor) -> str:
+    """What the monitor's distance is in terms of the front reading (for the Pilot context)."""
+    at = DEFAULT_SUCCESS.object_distance_m - FRONT_BEAM_START_M
+    return (f"The front range is measured from the camera, straight ahead at the camera's height, up to "
+            f"{sensor.max_m:g} m. The success monitor's {DEFAULT_SUCCESS.object_distance_m:g} m is measured on the "
+            f"floor from the drone's centre, {FRONT_BEAM_START_M * 100:.0f} cm behind the camera, to the nearest part "
+            f"of the object: a front reading of {at:.2f} m on the object itself is that limit.")
+
+
+def range_rule(target_id: str) -> str:
+    """Reach Object's stop rule in range terms for a target's kind (for a drone with a forward range sensor)."""
+    kind = target_kind(target_id)
+    if kind in ON_THE_BEAM:
+        return (f"Range stop rule for the {kind} (it reaches the camera's height, so the beam meets it): with the "
+                f"{kind} centred and nothing else straight ahead, it is within {DEFAULT_SUCCESS.object_distance_m:g} "
+                f"m when the front range reads {RANGE_STOP_M:g} m or less; this replaces the width rule. From its "
+                "side, a thin one (a TV, a shower's glass) may let the beam pass: face its front.")
+    return (f"A {kind} is lower than the camera: the beam passes over it and reads the wall behind it or nothing, "
+            "so the range cannot tell its distance: judge it by Reach Object's width rule, from its front.")
 
 
 def visual_cue_values(config: SuccessConfig = DEFAULT_SUCCESS) -> dict[str, str]:

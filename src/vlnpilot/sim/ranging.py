@@ -11,13 +11,13 @@ import math
 import mujoco
 import numpy as np
 
-from vlnpilot.ranging import RangeReading, RangeSensor
+from vlnpilot.ranging import FRONT_BEAM_START_M, RangeReading, RangeSensor
 from vlnpilot.sim import drone
 from vlnpilot.types import Pose
 
 # Where each beam leaves the drone, in its body frame (x forward, y left, z up): (direction, start offset).
 _BEAMS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
-    "front": ((1.0, 0.0, 0.0), (drone.LENGTH / 2 + 0.002, 0.0, 0.0)),  # the front camera's lens
+    "front": ((1.0, 0.0, 0.0), (FRONT_BEAM_START_M, 0.0, 0.0)),  # the front camera's lens
     "back": ((-1.0, 0.0, 0.0), (-drone.LENGTH / 2, 0.0, 0.0)),
     "left": ((0.0, 1.0, 0.0), (0.0, drone.WIDTH / 2, 0.0)),
     "right": ((0.0, -1.0, 0.0), (0.0, -drone.WIDTH / 2, 0.0)),
