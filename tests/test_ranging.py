@@ -87,7 +87,7 @@ def test_the_tello_answer_is_read_in_mm_and_8192_is_beyond_range() -> None:
 def test_a_drone_without_the_sensor_is_refused_in_one_line() -> None:
     with pytest.raises(ConfigError, match="valid: none, tof, multiranger"):
         range_sensor("lidar")
-    with pytest.raises(ConfigError, match=r"--sensors tof needs one forward time-of-flight beam.*Tello does not have"):
+    with pytest.raises(ConfigError, match=r"--sensors tof needs one forward time-of-flight.*Tello does not have"):
         check_sensors(Capabilities(), "Tello", "tof")  # the plain Tello
     check_sensors(Capabilities(range_sensor="tof"), "Tello", "tof")
     check_sensors(Capabilities(), "Tello", "none")
@@ -97,7 +97,8 @@ def test_a_drone_without_the_sensor_is_refused_in_one_line() -> None:
         assert plain.ranges() == () and range_sensing_of(plain) is None
 
 
-def _fly(sensors: str, context: str, query: str = "Find the refrigerator") -> tuple[list[tuple[str, ...]], list[dict]]:
+def _fly(sensors: str, context: str, query: str = "Find the refrigerator",
+         profile: str = "paper") -> tuple[list[tuple[str, ...]], list[dict]]:
     from vlnpilot.episode import EpisodeConfig, run_episode
     from vlnpilot.pilots.oracle import OraclePilot
     from vlnpilot.tasks import parse_query
@@ -111,8 +112,9 @@ def _fly(sensors: str, context: str, query: str = "Find the refrigerator") -> tu
 
     records: list[dict] = []
     with Simulator("cabin", SimConfig(render=False, sensors=sensors, range_noise=False)) as sim:
-        result = run_episode(sim, Listening(), parse_query(query, sim.scene), EpisodeConfig(context=context),
-                             spawn="living_room", on_step=records.append)
+        config = EpisodeConfig(context=context, profile=profile)
+        result = run_episode(sim, Listening(), parse_query(query, sim.scene), config, spawn="living_room",
+                             on_step=records.append)
     assert result.outcome == "success"
     return told, records
 
@@ -120,7 +122,8 @@ def _fly(sensors: str, context: str, query: str = "Find the refrigerator") -> tu
 def test_the_plus_context_states_the_readings_and_the_rule_in_range_terms() -> None:
     told, records = _fly("tof", "plus")
     assert all(lines[0].startswith("Range sensor (one forward time-of-flight beam") for lines in told)
-    assert "front beyond 1.2 m" in told[0][0] and "a front reading of 0.95 m on the object itself" in told[0][0]
+    assert "front beyond 1.2 m" in told[0][0] and "a front reading of 0.95 m on the object itself" in told[0][1]
+    assert max(len(line) for lines in told for line in lines) <= 500  # the server keeps 500 characters a line
     said = " ".join(lines[0] for lines in told)
     assert all(f"front {r['ranges']['front']['m']:.2f} m" in said for r in records if r["ranges"]["front"]["m"])
     reach = [lines for lines, r in zip(told, records, strict=False) if r["state"] == "Reach Object"]
@@ -140,3 +143,14 @@ def test_a_low_object_is_left_to_the_width_rule() -> None:
 
     assert "judge it by Reach Object's width rule" in range_rule("bed_1")
     assert "0.9 m or less" in range_rule("wardrobe_2")
+
+
+def test_the_ranged_profile_lets_the_range_license_a2_in_reach_object() -> None:
+    from vlnpilot.fsm import State, state_spec
+
+    assert "A2" in state_spec(State.REACH_OBJECT, "ranged").moves
+    assert "A2" not in state_spec(State.REACH_OBJECT, "paper").moves  # the paper's table is untouched
+    told, _ = _fly("tof", "plus", profile="ranged")
+    assert any("approach with `A2` (25 cm)" in line and "beyond 1.2 m" in line for lines in told for line in lines)
+    told, _ = _fly("tof", "plus")
+    assert not any("`A2`" in line for lines in told for line in lines)

@@ -20,7 +20,7 @@ from vlnpilot.commands import Command
 from vlnpilot.errors import ConfigError, UnknownNameError
 from vlnpilot.fsm import State
 from vlnpilot.ranging import RangeReading, RangeSensor, readings_text
-from vlnpilot.success import range_meaning, range_rule
+from vlnpilot.success import longer_move_rule, range_meaning, range_rule
 
 CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends the episode and cannot be undone. "
                 "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "
@@ -104,8 +104,9 @@ class PilotContext:
     """Tracks the episode for the context items and renders them as lines of the step prompt."""
 
     def __init__(self, config: ContextConfig, max_steps: int, sensor: RangeSensor | None = None,
-                 goal_target: str | None = None):
+                 goal_target: str | None = None, longer_moves: bool = False):
         self.config, self.max_steps = config, max_steps
+        self.longer_moves = longer_moves  # the profile allows A2 in Reach Object (`ranged`)
         self.sensor, self.goal_target = sensor, goal_target  # a pilot is told only of the sensors its drone has
         self._in_state = Travel()
         self._since_door: Travel | None = None  # None until the first Go Through Door
@@ -129,10 +130,12 @@ class PilotContext:
         """The context lines of this step's prompt (empty for the paper context)."""
         c, out = self.config, []
         if c.ranges and self.sensor is not None and readings:
-            out.append(f"Range sensor ({self.sensor.shown_as}), now: {readings_text(readings)}. "
-                       f"{range_meaning(self.sensor)}")
+            out.append(f"Range sensor ({self.sensor.shown_as}), now: {readings_text(readings)}.")
+            out.append(range_meaning(self.sensor))
             if self.goal_target and "front" in self.sensor.directions and state in _OBJECT_STATES:
                 out.append(range_rule(self.goal_target))
+                if self.longer_moves and state is State.REACH_OBJECT:
+                    out.append(longer_move_rule(self.sensor))
         if c.budget:
             out.append(f"Step budget: this is step {step} of {self.max_steps}; {self.max_steps - step} steps "
                        "remain after this one.")

@@ -32,7 +32,10 @@ class Capabilities:
     range_sensor: str = "none"  # range sensors it carries (vlnpilot.ranging.SENSORS): a `RangeSensing`
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        if self.range_sensor == "none":  # the records of drones without range sensors read as before
+            del out["range_sensor"]
+        return out
 
 
 # An environment that declares nothing is taken to sense nothing beyond the front camera and its pose: what is

@@ -18,7 +18,7 @@ from vlnpilot.commands import Command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
 from vlnpilot.environment import RangeSensing
-from vlnpilot.fsm import FINAL_STATES, State, parse_state
+from vlnpilot.fsm import FINAL_STATES, State, parse_state, state_spec
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Pilot, PilotError
@@ -128,7 +128,8 @@ class PilotAsker:
         bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
         self.sensing = sensing  # the drone's range sensors, read once per step
-        self.context = PilotContext(config.context, config.max_steps, sensor, task.goal_target)
+        longer = "A2" in state_spec(State.REACH_OBJECT, config.profile).moves
+        self.context = PilotContext(config.context, config.max_steps, sensor, task.goal_target, longer)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
         self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)

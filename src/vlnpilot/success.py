@@ -95,14 +95,15 @@ class CloseCue:
     shown_as: str  # how the prompt names them
     width_fraction: float
     then_m: float = 0.0
+    any_view: bool = False  # the width holds from any side, not only from the front (a round pot, a low box)
 
 
 FRIDGE_SIZED = CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (with the "
                         "cabinet under it), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION)
 OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
     CloseCue(("toilet",), "a toilet", 0.25),
-    CloseCue(("plant",), "a potted plant", 0.35),
-    CloseCue(("stove",), "a stove (the cooktop and oven, not the counter beside them)", 0.50),
+    CloseCue(("plant",), "a potted plant", 0.35, any_view=True),
+    CloseCue(("stove",), "a stove (the cooktop and oven, not the counter beside them)", 0.50, any_view=True),
     FRIDGE_SIZED,
     CloseCue(("shower",), "a shower", 0.80),
     CloseCue(("bookshelf",), "a bookshelf", 0.85),
@@ -123,7 +124,8 @@ _A1_M = COMMANDS["A1"].amount  # the shortest forward move, in metres
 
 def _cue_text(cue: CloseCue) -> str:
     if cue.width_fraction < FILLS_THE_WIDTH:
-        return f"{cue.shown_as}: {cue.width_fraction:.0%} of the image width".replace("%", " %")
+        side = " (from any side)" if cue.any_view else ""
+        return f"{cue.shown_as}: {cue.width_fraction:.0%} of the image width{side}".replace("%", " %")
     then = (f", then about {cue.then_m:g} m further straight ahead (about {round(cue.then_m / _A1_M)} `A1`, or until "
             "the safety system stops the drone): center its middle and face it squarely before its ends leave the "
             "image, because they tell where its middle is") if cue.then_m else ""
@@ -145,6 +147,15 @@ def range_meaning(sensor: RangeSensor) -> str:
             f"{sensor.max_m:g} m. The success monitor's {DEFAULT_SUCCESS.object_distance_m:g} m is measured on the "
             f"floor from the drone's centre, {FRONT_BEAM_START_M * 100:.0f} cm behind the camera, to the nearest part "
             f"of the object: a front reading of {at:.2f} m on the object itself is that limit.")
+
+
+def longer_move_rule(sensor: RangeSensor) -> str:
+    """When the forward range licenses `A2` in Reach Object (profile `ranged`): room for it, the stop distance and
+    the shield's margin (bench/longer_moves.py)."""
+    need = RANGE_STOP_M + COMMANDS["A2"].amount + 0.05
+    when = (f"reads beyond {sensor.max_m:g} m" if need >= sensor.max_m else f"reads {need:.2f} m or more")
+    return (f"Longer moves: while the front range {when}, approach with `A2` ({COMMANDS['A2'].amount * 100:.0f} cm) "
+            "instead of `A1`: there is room for it before the stop distance; otherwise `A1`.")
 
 
 def range_rule(target_id: str) -> str:

@@ -56,6 +56,7 @@ class TelloConfig(_Strict):
     geofence_m: float = Field(gt=0)
     keepalive_s: float = Field(gt=0, le=10)
     video_latency_s: float = Field(ge=0, le=5)
+    ext_tof: bool = False  # a RoboMaster TT (Tello Talent): its open-source controller answers `EXT tof?`
 
 
 def load_tello_config(path: str | Path | None = None, **overrides: Any) -> TelloConfig:

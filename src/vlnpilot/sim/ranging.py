@@ -28,12 +28,19 @@ _BEAMS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]]
 def beam_distance(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, direction: str, exclude_body: int,
                   max_m: float) -> float | None:
     """Exact distance (m) from the beam's start to the first surface it meets within `max_m`, else None."""
+    return beam(model, data, pose, direction, exclude_body, max_m)[0]
+
+
+def beam(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, direction: str, exclude_body: int,
+         max_m: float) -> tuple[float | None, int]:
+    """(distance within `max_m` or None, the geom the beam meets or -1): the ray cast behind a reading."""
     (dx, dy, dz), (ox, oy, oz) = _BEAMS[direction]
     c, s = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
     start = np.array([pose.x + ox * c - oy * s, pose.y + ox * s + oy * c, pose.z + oz])
     heading = np.array([dx * c - dy * s, dx * s + dy * c, dz])
-    hit = mujoco.mj_ray(model, data, start, heading, None, 1, exclude_body, np.zeros(1, np.int32))
-    return float(hit) if 0 <= hit <= max_m else None
+    geom = np.zeros(1, np.int32)
+    hit = mujoco.mj_ray(model, data, start, heading, None, 1, exclude_body, geom)
+    return (float(hit), int(geom[0])) if 0 <= hit <= max_m else (None, -1)
 
 
 def read_ranges(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, sensor: RangeSensor, exclude_body: int,
