@@ -1,14 +1,14 @@
-"""Do Reach Object's stop rules agree with the success monitor for every kind of object, not only the cabin's?
+"""Do Reach Object's stop rules agree with the success monitor for every kind of object, from every side?
 
     .venv/bin/python bench/object_width_cues.py [--houses 40] [--out bench/results/object_width_cues.md]
 
-The first prompts said an object is within the success distance when it spans at least 65 % of the image width
-(calibrated on the cabin's fridge, mirror and sink); the prompt now names a cue per kind of object
-(`success.OBJECT_CLOSE_CUES`). Here every target of the cabin, `cabin-v1` and houses 0..N-1 is rendered on its
-facing axis at 0.7x, 1.0x, 1.1x and 1.5x the success distance (where the drone can hover there), and the table
-says, per kind of object, how wide it looks and how often each rule is right: "close at 0.7x" (a pilot that obeys
-it can stop) and "false close" (a pilot that obeys it declares too early: a false success; for the widest kinds,
-whose cue adds half a metre after the object fills the image, "false close" means it fills it from 1.5x).
+The monitor measures to the nearest point of the object's footprint (`success.py`). The prompt names a width cue
+per kind of object (`success.OBJECT_CLOSE_CUES`) and, for a drone with a forward range sensor, a range rule for
+the kinds its beam meets (`success.RANGE_STOP_M`, `success.ON_THE_BEAM`). Here every target of the cabin,
+`cabin-v1` and houses 0..N-1 is seen from its front, from 45 degrees and from its side (`target_views.VIEW_ANGLES`)
+at 0.7x and 1.1x the success distance (where the drone can hover there), and the table says, per kind and view,
+how wide it looks, how often its cue is right ("close at 0.7x": a pilot that obeys it can stop; "false close at
+1.1x": a pilot that obeys it declares too early, a false success) and what the forward beam reads.
 """
 
 from __future__ import annotations
@@ -20,47 +20,72 @@ from pathlib import Path
 from machine import describe, publish  # bench/machine.py, beside this script
 
 from vlnpilot.scene.model import target_kind
-from vlnpilot.sim import Simulator
-from vlnpilot.sim.target_views import facing_view, free_standpoint, width_fraction
-from vlnpilot.tasks.success import OBJECT_CLOSE_WIDTH_FRACTION, SuccessConfig, close_cue
+from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.sim.ranging import beam
+from vlnpilot.sim.target_views import (
+    VIEW_ANGLES,
+    free_pose,
+    view,
+    view_pose,
+    width_fraction,
+)
+from vlnpilot.tasks.success import ON_THE_BEAM, RANGE_STOP_M, SuccessConfig, close_cue
 
-FACTORS = (0.7, 1.0, 1.1, 1.5)
-Widths = dict[str, dict[float, list[float]]]
+FACTORS = (0.7, 1.1)
+Seen = dict[tuple[str, str, float], list[tuple[float, float | None]]]  # (kind, view, factor) -> [(width, range)]
 
 
-def measure(scenes: list[str]) -> Widths:
-    """{kind: {factor: [width fraction per target that can be viewed from there]}}."""
+def measure(scenes: list[str]) -> Seen:
     success_m = SuccessConfig().object_distance_m
-    out: Widths = collections.defaultdict(lambda: collections.defaultdict(list))
+    out: Seen = collections.defaultdict(list)
     for name in scenes:
-        with Simulator(name) as sim:
+        with Simulator(name, SimConfig(width=16, height=16, rear_width=16, rear_height=16)) as sim:
             for target in sim.scene.targets:
-                ids = sim.target_geoms[target.id]
-                for k in FACTORS:
-                    if free_standpoint(sim, target.id, k * success_m):
-                        seg = facing_view(sim, target.id, k * success_m)
-                        out[target_kind(target.id)][k].append(width_fraction(seg, ids))
+                for view_name, angle in VIEW_ANGLES.items():
+                    for k in FACTORS:
+                        pose = next((p for p in (view_pose(sim, target.id, k * success_m, angle, side)
+                                                 for side in (1, -1)) if free_pose(sim, target.id, p)), None)
+                        if pose is None:
+                            continue
+                        width = width_fraction(view(sim, pose), sim.target_geoms[target.id])
+                        front, _ = beam(sim.model, sim.data, pose, "front", sim._body_id, 4.0)
+                        out[(target_kind(target.id), view_name, k)].append((width, front))
     return out
 
 
-def _count(widths: list[float], threshold: float) -> str:
-    return f"{sum(x >= threshold for x in widths)}/{len(widths)}" if widths else "–"
+def _count(hits: list[bool]) -> str:
+    return f"{sum(hits)}/{len(hits)}" if hits else "–"
 
 
-def table(widths: Widths, houses: int) -> str:
-    one = OBJECT_CLOSE_WIDTH_FRACTION
-    lines = [f"Reach Object's stop rules against the monitor (within {SuccessConfig().object_distance_m} m): one "
-             f"{one:.0%} rule, and the cue of each kind; cabin, cabin-v1 and houses 0..{houses - 1}; {describe()}", "",
-             "| object | targets | width at 0.7x | 1.0x | 1.1x | 1.5x | 65 %: close at 0.7x | 65 %: false close "
-             "at 1.1x | its cue | cue: close at 0.7x | cue: false close |", "|---" * 11 + "|"]
-    for kind in sorted(widths):
-        w, cue = widths[kind], close_cue(kind)
-        span = [f"{min(w[k]):.0%}–{max(w[k]):.0%}" if w[k] else "–" for k in FACTORS]
+def _span(values: list[float]) -> str:
+    return f"{min(values):.0%}–{max(values):.0%}" if values else "–"
+
+
+def table(seen: Seen, houses: int) -> str:
+    lines = [f"Reach Object's stop rules against the footprint monitor (within {SuccessConfig().object_distance_m:g} "
+             f"m of the nearest point), cabin, cabin-v1 and houses 0..{houses - 1}; {describe()}", "",
+             "| object | view | targets | width at 0.7x | at 1.1x | its cue | cue: close at 0.7x | cue: false close at "
+             f"1.1x | front range at 0.7x | at 1.1x | range <= {RANGE_STOP_M:g} m: close at 0.7x | false close at "
+             "1.1x |",
+             "|---" * 12 + "|"]
+    for kind in sorted({k for k, _, _ in seen}):
+        cue = close_cue(kind)
         shown = f"{cue.width_fraction:.0%}" + (f" + {cue.then_m:g} m" if cue.then_m else "")
-        reach = "–" if cue.then_m else _count(w[0.7], cue.width_fraction)  # the widest fill it, then fly on
-        false_close = _count(w[1.5] if cue.then_m else w[1.1], cue.width_fraction)
-        lines.append(f"| {kind} | {max(len(v) for v in w.values())} | {' | '.join(span)} | {_count(w[0.7], one)} | "
-                     f"{_count(w[1.1], one)} | {shown} | {reach} | {false_close} |")
+        for view_name in VIEW_ANGLES:
+            near, far = seen.get((kind, view_name, 0.7), []), seen.get((kind, view_name, 1.1), [])
+            if not near and not far:
+                continue
+            ranges = [[r for _, r in near], [r for _, r in far]]
+            shown_ranges = [" ".join(sorted({"beyond" if r is None else f"{r:.2f}" for r in rs})[:3]) or "–"
+                            for rs in ranges]
+            on_beam = kind in ON_THE_BEAM
+            lines.append(
+                f"| {kind} | {view_name} | {max(len(near), len(far))} | {_span([w for w, _ in near])} | "
+                f"{_span([w for w, _ in far])} | {shown} | "
+                f"{'–' if cue.then_m else _count([w >= cue.width_fraction for w, _ in near])} | "
+                f"{_count([w >= cue.width_fraction for w, _ in far])} | {shown_ranges[0]} | {shown_ranges[1]} | "
+                f"{_count([r is not None and r <= RANGE_STOP_M for r in ranges[0]]) if on_beam else 'no rule'} | "
+                f"{_count([r is not None and r <= RANGE_STOP_M for r in ranges[1]]) if on_beam else 'no rule'} |")
     return "\n".join(lines) + "\n"
 
 

@@ -101,3 +101,21 @@ def test_a_target_is_not_visible_from_another_room_through_a_wall(sim):
     gt = sim.ground_truth()
     assert gt.room() == "bathroom"  # 0.8 m from the mirror, facing it, but behind the partition
     assert not gt.target_visible("mirror")
+
+
+def test_target_footprint_by_hand(geo_sim, gt):
+    """The fridge's body spans x 2.08..2.80, y 2.90..3.58 (refrigerator_body), the strip of its door gap is 3 mm
+    proud of it (y 2.894) and its handles reach y 2.85: the monitor measures to the nearest corner of the door gap
+    and counts the heading that passes 2.6 deg beside the body's far corner."""
+    from vlnpilot.core.footprint import footprint_distance, footprint_off_heading_deg
+
+    footprint = gt.target_footprint("refrigerator")
+    xs = [x for poly in footprint for x, _ in poly]
+    ys = [y for poly in footprint for _, y in poly]
+    assert (min(xs), max(xs), max(ys)) == pytest.approx((2.08, 2.80, 3.58))
+    assert min(ys) == pytest.approx(2.85)  # the handles' fronts
+    pose = gt.pose()  # (2.0, 1.8), facing north
+    assert footprint_distance(pose, footprint) == pytest.approx(math.hypot(2.08 - 2.0, 2.894 - 1.8))
+    assert footprint_off_heading_deg(pose, footprint) == pytest.approx(90.0 - math.degrees(math.atan2(1.78, 0.08)))
+    assert footprint_distance(Pose(2.44, 2.5, 1.0, 90.0), footprint) == pytest.approx(2.894 - 2.5)  # between handles
+    assert footprint_off_heading_deg(Pose(2.44, 2.5, 1.0, 90.0), footprint) == 0.0

@@ -11,6 +11,7 @@ from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.fsm import State
 from vlnpilot.core.records import Motion, Pose
 from vlnpilot.scene import Scene
+from vlnpilot.tasks.success import recorded_success
 from vlnpilot.tasks.task import (
     Oscillations,
     PathLength,
@@ -99,6 +100,11 @@ class FakeGroundTruth:
     def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
         return self._db
 
+    def target_footprint(self, target_id: str) -> tuple[tuple[tuple[float, float], ...], ...]:
+        """One point at (dist, bearing) from the drone (at the origin, heading +x)."""
+        dist, bearing = self._db
+        return (((dist * math.cos(math.radians(bearing)), dist * math.sin(math.radians(bearing))),),)
+
     def target_visible(self, target_id: str) -> bool:
         return self._visible
 
@@ -143,6 +149,34 @@ def test_judge_object_goal(scene: Scene, dist: float, bearing: float, visible: b
     result, reason = judge(OBJECT_TASK, State.DESCRIBE_OBJECT, gt)
     assert result is ok
     assert f"{dist:.2f} m" in reason and ("not visible" in reason) is (not visible)
+
+
+class FootprintTruth(FakeGroundTruth):
+    """A bed 2 m long and 1 m wide (x from 1.0 to 3.0, y from -0.5 to 0.5); the drone at `pose`."""
+
+    def __init__(self, scene: Scene, pose: Pose):
+        super().__init__(scene, "bedroom", 9.0, 90.0, True)  # the point monitor's middle of the front: far away
+        self._pose = pose
+
+    def pose(self) -> Pose:
+        return self._pose
+
+    def target_footprint(self, target_id: str) -> tuple[tuple[tuple[float, float], ...], ...]:
+        return (((1.0, -0.5), (3.0, -0.5), (3.0, 0.5), (1.0, 0.5)),)
+
+
+@pytest.mark.parametrize(("pose", "ok", "why"), [
+    (Pose(2.0, 1.4, 1.0, -90.0), True, "0.90 m to its nearest point"),  # beside its middle, facing it
+    (Pose(3.5, 1.2, 1.0, 180.0), True, "0.86 m"),  # off a corner, the heading passes beside the bed, 14 deg off
+    (Pose(3.5, 1.4, 1.0, 90.0), False, "off the heading"),  # close, looking away
+    (Pose(2.0, 1.6, 1.0, -90.0), False, "1.10 m"),  # looking straight at it, 1.1 m out
+    (Pose(0.0, 0.0, 1.0, 0.0), True, "1.00 m"),  # at 1 m from the foot of the bed, looking along it
+])
+def test_judge_measures_to_the_footprint(scene: Scene, pose: Pose, ok: bool, why: str) -> None:
+    result, reason = judge(OBJECT_TASK, State.DESCRIBE_OBJECT, FootprintTruth(scene, pose))
+    assert result is ok, reason
+    assert why in reason
+    assert not judge(OBJECT_TASK, State.DESCRIBE_OBJECT, FootprintTruth(scene, pose), recorded_success({}))[0]
 
 
 def test_judge_object_goal_declared_wrong_final_state(scene: Scene) -> None:

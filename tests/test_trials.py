@@ -16,6 +16,7 @@ from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.tasks.success import recorded_success
 from vlnpilot.tasks.task import Task
 
 TRIALS = Path(__file__).resolve().parents[1] / "trials"
@@ -34,7 +35,8 @@ def replay(sim: Simulator, trial_dir: Path, **overrides):
     summary, _ = load_run(trial_dir)
     cfg = summary["config"]
     recorded = {"max_steps": cfg["max_steps"], "profile": cfg["profile"], "seed": cfg["seed"], "shield": cfg["shield"],
-                "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper")}
+                "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper"),
+                "success": recorded_success(cfg.get("success"))}  # judged by the monitor it was flown under
     config = EpisodeConfig(**{**recorded, **overrides})
     return run_episode(sim, make_pilot(f"replay:{trial_dir}"), Task(**summary["task"]), config,
                        spawn=summary["spawn"])

@@ -25,6 +25,9 @@ err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wr
 
 SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name: cabin or house:SEED[?rooms=N&types=a,b].")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
+PROFILE_HELP = "FSM profile: paper, fast or ranged (fast, and A2 in Reach Object)."
+SensorsOpt = Annotated[str, typer.Option("--sensors", help="Range sensors the drone carries: none, tof (a RoboMaster "
+                                         "TT's forward ToF) or multiranger (Crazyflie Multi-ranger deck).")]
 PilotOptionOpt = Annotated[list[str] | None, typer.Option(
     "--pilot-option", metavar="KEY=VALUE", help="A pilot option, e.g. detail=high or timeout=30 (repeatable).")]
 
@@ -104,7 +107,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
         pilot_option: PilotOptionOpt = None,
-        profile: Annotated[str, typer.Option("--profile", help="FSM profile: paper or fast.")] = "paper",
+        profile: Annotated[str, typer.Option("--profile", help=PROFILE_HELP)] = "paper",
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
         shield: Annotated[str | None, typer.Option(
@@ -113,6 +116,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         context: Annotated[str, typer.Option("--context", help="Pilot context: paper (the paper's five inputs) "
                                              "or plus (odometry, budget, memory, confirmation).")] = "paper",
         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a run already in --out.")] = False,
+        sensors: SensorsOpt = "none",
         robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator) or tello.")] = "sim",
         tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
         judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
@@ -138,7 +142,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.tasks.task import parse_query
 
     robot = check_robot(robot, tello_host)
-    shield = shield or default_shield(robot_capabilities(robot).ground_truth)
+    capabilities = robot_capabilities(robot, sensors, tello_host)  # refuses a sensor the drone does not carry
+    shield = shield or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
@@ -156,7 +161,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         options["base_url"] = check_base_url(base_url)
     _say_remote_url(pilot)
     pilot_obj = make_pilot(pilot, **options)
-    check_capabilities(robot_capabilities(robot), robot, shield=shield, pilot=pilot_obj)  # before anything flies
+    check_capabilities(capabilities, robot, shield=shield, pilot=pilot_obj)  # before anything flies
     run_dir = claim_run_dir(out or default_run_dir("runs", f"{spawn_id}-{query}"), overwrite=overwrite)
 
     def show(rec: dict) -> None:
@@ -173,7 +178,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
-                                        operator=operator) as env, _sigterm_interrupts():
+                                        operator=operator, sensors=sensors) as env, _sigterm_interrupts():
         try:
             result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
                                           pilot_spec=pilot, overwrite=True,  # claimed above
@@ -287,7 +292,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           out: OutOpt = None,
           resume: Annotated[bool, typer.Option("--resume", help="Run only the episodes missing in --out.")] = False,
           seed: Annotated[int | None, typer.Option("--seed", help="Base seed of the repetitions.")] = None,
-          profile: Annotated[str | None, typer.Option("--profile", help="FSM profile: paper or fast.")] = None,
+          profile: Annotated[str | None, typer.Option("--profile", help=PROFILE_HELP)] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           pilot_option: PilotOptionOpt = None,
           shield: Annotated[str | None, typer.Option("--shield", help="off, geometry or depth (default: geometry).")]
@@ -295,6 +300,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
           context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+          sensors: SensorsOpt = "none",
           plugin: Annotated[list[str] | None, typer.Option(
               "--plugin", help="A module to import first, in every worker too: it may register pilots and "
               "executors. Repeatable.")] = None) -> None:
@@ -314,7 +320,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=check_base_url(base_url), shield=shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
-                              plugins=tuple(plugin or ()))
+                              plugins=tuple(plugin or ()), sensors=sensors)
     if report:
         from vlnpilot.report.html import write_bench_report
 

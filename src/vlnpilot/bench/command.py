@@ -8,6 +8,12 @@ from typing import Any
 
 from vlnpilot.bench.executors import BenchError
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
+from vlnpilot.core.ranging import range_sensor
+
+
+def _checked_sensors(name: str) -> str:
+    sensor = range_sensor(name)  # a bad name: one line, before anything runs
+    return sensor.name if sensor else "none"
 
 
 def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "oracle", reps: int | None = None,
@@ -16,7 +22,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
                   seed: int | None = None, profile: str | None = None, base_url: str | None = None,
                   progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
                   render: bool = True, pilot_options: Mapping[str, str] | None = None,
-                  plugins: Sequence[str] = (), console: Any = None) -> Path:
+                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none") -> Path:
     """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
 
     `suite`: 'paper' or a YAML file. `pilots`: 'oracle,openai:gpt-4.1' or a list. reps / max_steps / seed /
@@ -26,7 +32,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     them enter the config hash. `pilot_options`: {option: value string} (`--pilot-option`), coerced by each
     pilot's options class and given to every pilot that takes the option; recorded with the pilot (and hashed).
     Raises BenchError (a VLNPilotError) when episodes failed, after recording every finished one: rerun with
-    resume=True to fly only the missing ones.
+    resume=True to fly only the missing ones. `sensors`: the range sensors (none | tof | multiranger) of every
+    row's drone that names none itself.
     """
     if console is None:
         from rich.console import Console
@@ -44,7 +51,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         profile=profile, base_url=base_url, pilot_options=dict(pilot_options or {}), executor=executor,
         episode_options={"shield": str(shield or "off").lower(), **(episode_options or {})},
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render,
-        plugins=tuple(plugins), progress=progress)
+        plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors))
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:

@@ -46,6 +46,7 @@ class EpisodeSpec:
     save_frames: bool = True
     spawn_jitter_m: float = 0.0
     spawn_jitter_deg: float = 0.0
+    sensors: str = "none"  # the range sensors the drone carries (vlnpilot.core.ranging.SENSORS)
 
 
 @dataclass(frozen=True)
@@ -66,13 +67,13 @@ class SimulatorCache:
         self._all: list[Any] = []
         self._lock = threading.Lock()
 
-    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float) -> Any:
+    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none") -> Any:
         from vlnpilot.sim import SimConfig, Simulator
 
         sims = getattr(self._local, "sims", None)
         if sims is None:
             sims = self._local.sims = {}
-        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg))
+        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors))
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
@@ -145,7 +146,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     from vlnpilot.prompting.render import prompt_hash
     from vlnpilot.tasks.task import Task
 
-    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg)
+    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors)
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean

@@ -58,6 +58,7 @@ class BenchSettings:
     resume: bool = False
     render: bool = True  # False: no camera images (only for pilots that do not look), no frames recorded
     save_frames: bool = True
+    sensors: str = "none"  # range sensors of every row's drone that names none itself (vlnpilot.core.ranging.SENSORS)
     plugins: tuple[str, ...] = ()  # modules to import in every worker (custom pilots registered by name)
     progress: bool = True
 
@@ -181,6 +182,7 @@ def config_of(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSetting
         "seed": suite.seed, "pilots": [{"spec": p.spec, "options": p.options} for p in pilots],
         "episode_options": dict(settings.episode_options), "render": settings.render,
         "save_frames": settings.save_frames and settings.render,
+        **({"sensors": settings.sensors} if settings.sensors != "none" else {}),  # benches before it hash alike
     }
 
 
@@ -203,7 +205,8 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                     profile=suite.profile, run_dir=str((out / rel).resolve()), run_dir_rel=rel.as_posix(),
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
                     render=settings.render, save_frames=settings.save_frames,
-                    spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg))
+                    spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg,
+                    sensors=row.sensors or settings.sensors))
     return specs
 
 

@@ -36,7 +36,8 @@ from vlnpilot.tasks.task import Task, parse_query
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
              "spawn_labels", "rows")
-_ROW_KEYS = ("id", "spawn", "query", "goal", "scene")  # a row's own scene overrides the suite's (house suites)
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors")  # a row's own scene overrides the suite's
+# (house suites); a row's `sensors` (none, tof, multiranger: vlnpilot.core.ranging) the bench's --sensors
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -58,6 +59,7 @@ class SuiteRow:
     goal_room: str
     goal_target: str | None = None
     scene: str | None = None  # this row's scene when it differs from the suite's (e.g. 'house:7')
+    sensors: str | None = None  # the range sensors this row's drone carries, when it names them (else --sensors)
 
     @property
     def task(self) -> Task:
@@ -66,7 +68,8 @@ class SuiteRow:
     def canonical(self) -> dict[str, Any]:
         out = {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
                "goal_target": self.goal_target}
-        return {**out, "scene": self.scene} if self.scene else out
+        out = {**out, "scene": self.scene} if self.scene else out
+        return {**out, "sensors": self.sensors} if self.sensors else out
 
 
 @dataclass(frozen=True)
@@ -113,7 +116,7 @@ class Suite:
                 "spawn_labels": dict(self.spawn_labels),
                 "rows": [{"id": r.id, "spawn": r.spawn, "query": r.query,
                           "goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})},
-                          **({"scene": r.scene} if r.scene else {})}
+                          **({"scene": r.scene} if r.scene else {}), **({"sensors": r.sensors} if r.sensors else {})}
                          for r in self.rows]}
 
     def dump(self) -> str:
@@ -280,6 +283,12 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
                 parsed = task.goal_room + (f" / {task.goal_target}" if task.goal_target else "")
                 errors.append(f"{where}: the goal says {room}" + (f" / {target}" if target else "")
                               + f" but the query {query!r} parses to {parsed}")
+    sensors = raw.get("sensors")
+    if sensors is not None:
+        from vlnpilot.core.ranging import SENSORS
+
+        if str(sensors) not in SENSORS:
+            errors.append(f"{where}: unknown sensors {sensors!r}; valid: {', '.join(SENSORS)}")
     row_id = raw.get("id")
     if row_id is None:
         row_id = _slug(f"{spawn}-{query}")
@@ -288,7 +297,8 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
     if len(errors) > before:
         return None
     return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target,
-                    scene=scene.name if row_scene is not None else None)
+                    scene=scene.name if row_scene is not None else None,
+                    sensors=str(sensors) if sensors is not None else None)
 
 
 def _slug(text: str) -> str:

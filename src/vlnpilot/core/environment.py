@@ -8,14 +8,15 @@ Callers read the declaration (`capabilities_of`, `ground_truth_of`, `depth_sensi
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
-from typing import TYPE_CHECKING, Protocol, cast, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, cast, runtime_checkable
 
 import numpy as np
 
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.core.records import MotionSampling, Observation, Pose
+from vlnpilot.core.ranging import SENSORS, RangeReading, range_sensor
+from vlnpilot.core.records import Footprint, MotionSampling, Observation, Pose
 
 if TYPE_CHECKING:  # the scene sits above the floor; the protocol only names it
     from vlnpilot.scene.model import Scene, Spawn
@@ -38,6 +39,9 @@ class GroundTruth(MotionSampling, Protocol):
     def target_distance_bearing(self, target_id: str) -> tuple[float, float]:
         """Horizontal distance (m) from the drone to the target, and its bearing (deg, + = left of heading)."""
 
+    def target_footprint(self, target_id: str) -> Footprint:
+        """The target's footprint: the outline of each of its parts projected on the floor (world x, y)."""
+
     def target_visible(self, target_id: str) -> bool:
         """Whether the target occupies enough pixels of the front camera (segmentation render)."""
 
@@ -56,9 +60,13 @@ class Capabilities:
     depth: bool = False  # a front depth image (depth shield)
     rear_view: bool = False  # the chase camera behind the drone
     contact_sensing: bool = False  # whether `Observation.collided` is known
+    range_sensor: str = "none"  # range sensors it carries (vlnpilot.core.ranging.SENSORS): a `RangeSensing`
 
-    def to_dict(self) -> dict[str, bool]:
-        return asdict(self)
+    def to_dict(self) -> dict[str, Any]:
+        out = asdict(self)
+        if self.range_sensor == "none":  # the records of drones without range sensors read as before
+            del out["range_sensor"]
+        return out
 
 
 # An environment that declares nothing is taken to sense nothing beyond the front camera and its pose: what is
@@ -101,6 +109,13 @@ class DepthSensing(MotionSampling, Protocol):
         """The front camera's z-depth image (H x W, metres along the optical axis) at the current pose."""
 
 
+@runtime_checkable
+class RangeSensing(Protocol):
+    """An environment whose `capabilities.range_sensor` is not `none`: its readings at the current pose."""
+
+    def ranges(self) -> tuple[RangeReading, ...]: ...
+
+
 def capabilities_of(env: object) -> Capabilities:
     """An environment's declared capabilities; `UNDECLARED` (nothing) if it declares none."""
     declared = getattr(env, "capabilities", None)
@@ -115,6 +130,21 @@ def ground_truth_of(env: object) -> GroundTruth | None:
 def depth_sensing_of(env: object) -> DepthSensing | None:
     """The environment as a front depth sensor if it declares one, else None."""
     return cast(DepthSensing, env) if capabilities_of(env).depth else None
+
+
+def range_sensing_of(env: object) -> RangeSensing | None:
+    """The environment as a range sensor if it declares one, else None."""
+    return cast(RangeSensing, env) if capabilities_of(env).range_sensor != "none" else None
+
+
+def check_sensors(caps: Capabilities, robot: str, sensors: str | None) -> None:
+    """Refuse `--sensors NAME` when the drone does not carry that sensor (one line naming what is missing)."""
+    wanted = range_sensor(sensors)
+    if wanted is not None and caps.range_sensor != wanted.name:
+        has = caps.range_sensor if caps.range_sensor != "none" else "no range sensor"
+        raise ConfigError(f"--sensors {wanted.name} needs {wanted.shown_as}, which the {robot} does not have "
+                          f"({has}); valid here: none" + (f", {caps.range_sensor}" if caps.range_sensor in SENSORS
+                                                           and caps.range_sensor != "none" else ""))
 
 
 def usable_shields(caps: Capabilities) -> str:

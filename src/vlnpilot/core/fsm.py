@@ -136,7 +136,11 @@ _FAST_EXTRA: dict[State, tuple[str, ...]] = {
     S.POSITION_IN_CENTER: ("A3",),
     S.SEARCH_OBJECT: ("A3",),
 }
-PROFILES = ("paper", "fast")
+# `ranged` (issue 23, bench/longer_moves.py): `fast`, and `A2` in Reach Object, for a drone whose forward range
+# tells the pilot when there is room for it (a 25 cm move while a RoboMaster TT's ToF reads beyond 1.2 m halves the
+# approach's steps); the shield still keeps every move clear.
+_RANGED_EXTRA: dict[State, tuple[str, ...]] = {**_FAST_EXTRA, S.REACH_OBJECT: ("A2",)}
+PROFILES = ("paper", "fast", "ranged")
 
 
 def fsm_table(profile: str = "paper") -> dict[State, StateSpec]:
@@ -144,8 +148,8 @@ def fsm_table(profile: str = "paper") -> dict[State, StateSpec]:
     if profile not in PROFILES:
         raise UnknownNameError("FSM profile", profile, PROFILES)
     table = {spec.state: spec for spec in _PAPER_TABLE}
-    if profile == "fast":
-        for state, extra in _FAST_EXTRA.items():
+    if profile != "paper":
+        for state, extra in (_FAST_EXTRA if profile == "fast" else _RANGED_EXTRA).items():
             spec = table[state]
             moves = tuple(c for c in COMMANDS if c in spec.moves or c in extra)
             table[state] = StateSpec(spec.state, spec.goal, moves, spec.paper_next, spec.added_next,

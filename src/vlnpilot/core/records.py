@@ -91,6 +91,12 @@ class Observation:
     executed: bool = field(default=True, compare=False)
 
 
+Point2D = tuple[float, float]
+# Where an object stands on the floor, seen from above: convex polygons (x, y corners, counter-clockwise), one per
+# part of the object; the success monitor measures to the nearest of their points.
+Footprint = tuple[tuple[Point2D, ...], ...]
+
+
 @runtime_checkable
 class MotionSampling(Protocol):
     """How an environment checks a motion for contact, so that a shield can predict exactly what it will do."""

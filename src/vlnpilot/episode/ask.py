@@ -24,7 +24,9 @@ from vlnpilot.core.decision import (
     traits_of,
     validate_decision,
 )
-from vlnpilot.core.fsm import FINAL_STATES, State, parse_state
+from vlnpilot.core.environment import RangeSensing
+from vlnpilot.core.fsm import FINAL_STATES, State, parse_state, state_spec
+from vlnpilot.core.ranging import RangeReading, RangeSensor
 from vlnpilot.core.records import Observation
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
@@ -111,6 +113,7 @@ class StepAnswer:
     confirmation: dict[str, Any] | None = None
     fatal: bool = False
     usages: list[Usage] = field(default_factory=list)
+    ranges: tuple[RangeReading, ...] = ()  # the range readings the pilot was told this step (before the move)
 
     @property
     def valid(self) -> bool:
@@ -126,11 +129,14 @@ def needs_confirmation(context: ContextConfig, decision: Decision | None, asked:
 class PilotAsker:
     """Asks the episode's pilot (or a person taking a step over) and remembers what the next prompt needs."""
 
-    def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any):
+    def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any,
+                 sensing: RangeSensing | None = None, sensor: RangeSensor | None = None):
         self.pilot, self.task, self.config, self.topo = pilot, task, config, topological_map
         bounded = traits_of(pilot).uses_step_deadline  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
-        self.context = PilotContext(config.context, config.max_steps)
+        self.sensing = sensing  # the drone's range sensors, read once per step
+        longer = "A2" in state_spec(State.REACH_OBJECT, config.profile).moves
+        self.context = PilotContext(config.context, config.max_steps, sensor, task.goal_target, longer)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
         self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)
@@ -144,7 +150,8 @@ class PilotAsker:
         feedback = list(self.notes)
         image = draw_corridor(obs.front_rgb) if config.overlay == "corridor" else obs.front_rgb
         step_end = time.monotonic() + (config.step_deadline_s or 0.0)
-        context_lines, in_state = self.context.lines(step), self.context.in_state()
+        out.ranges = self.sensing.ranges() if self.sensing is not None else ()
+        context_lines, in_state = self.context.lines(step, state, out.ranges), self.context.in_state()
         attempt, reasks = 0, 0
         while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=self.task.query, topological_map=self.topo, state=state,

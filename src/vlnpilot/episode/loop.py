@@ -22,9 +22,10 @@ from dataclasses import dataclass
 from typing import Any
 
 from vlnpilot.core.commands import HOVER, Command, get_command
-from vlnpilot.core.environment import Environment, GroundTruth, capabilities_of, ground_truth_of
+from vlnpilot.core.environment import Environment, GroundTruth, capabilities_of, ground_truth_of, range_sensing_of
 from vlnpilot.core.errors import ConfigError, RobotHalt
 from vlnpilot.core.fsm import FINAL_STATES, State, parse_state
+from vlnpilot.core.ranging import range_sensor
 from vlnpilot.core.records import Observation, Pose
 from vlnpilot.core.rundir import Recorder
 from vlnpilot.episode.ask import PilotAsker, StepAnswer
@@ -117,11 +118,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
     return result
 
 
-def _preflight(env: Environment, pilot: Pilot, config: EpisodeConfig) -> SafetyLayer:
+def _preflight(env: Environment, pilot: BasePilot, config: EpisodeConfig) -> SafetyLayer:
     """Every setting that can be checked on the ground, before `reset` (a real drone takes off there): a pilot
     that needs ground truth the environment does not declare, a shield it cannot serve, and what the pilot
     itself checks of the episode (a replay refuses another scene or other settings than its recording's)."""
-    if getattr(pilot, "privileged", False) and not capabilities_of(env).ground_truth:
+    if pilot.traits.privileged and not capabilities_of(env).ground_truth:
         _attach_ground_truth(env, pilot)  # raises the one-line refusal
     safety = make_safety(config.shield, env, env.scene, config.safety)
     _tell_pilot_the_episode(pilot, env.scene, config)
@@ -138,7 +139,9 @@ def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, ob
     recording = EpisodeRecording(recorder, on_step)
     recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
-    return measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
+    sensor = range_sensor(capabilities_of(env).range_sensor)
+    return measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map(), range_sensing_of(env),
+                                           sensor)
 
 
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
@@ -146,7 +149,7 @@ def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, m
     """A step that ends the episode before anything is executed still costs its calls and is recorded."""
     measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose))
     recording.step(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
-                              confirmation=answer.confirmation))
+                              confirmation=answer.confirmation, ranges=answer.ranges))
 
 
 def _not_to_execute(control: LoopControl, answer: StepAnswer) -> _End | None:
@@ -194,7 +197,7 @@ def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, 
     override = override_reason(state, profile, flown, not answer.valid, verdict.interventions, verdict.next_state)
     return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, flown,
                       verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
-                      override, answer.confirmation)
+                      override, answer.confirmation, ranges=answer.ranges)
 
 
 def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, failed_streak: int,

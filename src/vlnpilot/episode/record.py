@@ -49,6 +49,7 @@ class StepRecord:
     verdict: SafetyVerdict | None = None
     override: str | None = None  # why an executed command outside the state's allowed moves ran
     confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
+    ranges: tuple[Any, ...] = ()  # the range readings the pilot was told (ranging.RangeReading), before the move
 
     def to_dict(self) -> dict[str, Any]:
         record = {key: value(self) for key, value in ALWAYS_WRITTEN.items()}
@@ -91,6 +92,7 @@ WRITTEN_WHEN_SET: dict[str, Callable[[StepRecord], Any]] = {
     "confirmation": lambda r: r.confirmation,  # the exchange before a final state (confirm_final)
     "human": lambda r: True if r.decision is not None and r.decision.model == HUMAN else None,  # the live station
     "robot": lambda r: r.obs.info or None,  # a real robot's facts: frame age, battery, safety events
+    "ranges": lambda r: {x.direction: x.as_dict() for x in r.ranges} or None,  # --sensors: metres, None beyond
 }
 FRAMES = "frames"  # added by `EpisodeRecording.step` when the run is recorded: the step's frame files
 

@@ -20,6 +20,8 @@ from typing import Any
 from vlnpilot.core.commands import Command
 from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.fsm import State
+from vlnpilot.core.ranging import RangeReading, RangeSensor, readings_text
+from vlnpilot.tasks.success import longer_move_rule, range_meaning, range_rule
 
 CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends the episode and cannot be undone. "
                 "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "
@@ -40,6 +42,7 @@ class ContextConfig:
     budget: bool = False  # steps used and left
     memory: int = 0  # the pilot's own last N decisions (state, move, next state, room, description)
     confirm_final: bool = False  # ask once more, with a warning, before a final state is accepted
+    ranges: bool = False  # the drone's range readings, in metres, and the stop rule in their terms (if it has any)
 
     def __post_init__(self) -> None:
         if not isinstance(self.memory, int) or not 0 <= self.memory <= 10:
@@ -55,7 +58,7 @@ class ContextConfig:
 
 CONTEXT_PRESETS: dict[str, ContextConfig] = {
     "paper": ContextConfig(),
-    "plus": ContextConfig(odometry=True, budget=True, memory=4, confirm_final=True),
+    "plus": ContextConfig(odometry=True, budget=True, memory=4, confirm_final=True, ranges=True),
 }
 
 
@@ -116,8 +119,11 @@ def in_state_text(moves: tuple[str, ...], travel: Travel) -> str:
 class PilotContext:
     """Tracks the episode for the context items and renders them as lines of the step prompt."""
 
-    def __init__(self, config: ContextConfig, max_steps: int):
+    def __init__(self, config: ContextConfig, max_steps: int, sensor: RangeSensor | None = None,
+                 goal_target: str | None = None, longer_moves: bool = False):
         self.config, self.max_steps = config, max_steps
+        self.longer_moves = longer_moves  # the profile allows A2 in Reach Object (`ranged`)
+        self.sensor, self.goal_target = sensor, goal_target  # a pilot is told only of the sensors its drone has
         self._in_state = Travel()
         self._moves: tuple[str, ...] = ()  # the executed commands of the current state, oldest first
         self._since_door: Travel | None = None  # None until the first Go Through Door
@@ -142,9 +148,16 @@ class PilotContext:
         """The line every context gets on the current state (`PilotInput.in_state`)."""
         return in_state_text(self._moves, self._in_state)
 
-    def lines(self, step: int) -> tuple[str, ...]:
+    def lines(self, step: int, state: State | None = None, readings: tuple[RangeReading, ...] = ()) -> tuple[str, ...]:
         """The context lines of this step's prompt (empty for the paper context)."""
         c, out = self.config, []
+        if c.ranges and self.sensor is not None and readings:
+            out.append(f"Range sensor ({self.sensor.shown_as}), now: {readings_text(readings)}.")
+            out.append(range_meaning(self.sensor))
+            if self.goal_target and "front" in self.sensor.directions and state in _OBJECT_STATES:
+                out.append(range_rule(self.goal_target))
+                if self.longer_moves and state is State.REACH_OBJECT:
+                    out.append(longer_move_rule(self.sensor))
         if c.budget:
             out.append(f"Step budget: this is step {step} of {self.max_steps}; {self.max_steps - step} steps "
                        "remain after this one.")
@@ -160,6 +173,9 @@ class PilotContext:
             out.append("Your last decisions, oldest first:")
             out += [f"  {m}" for m in self._memory]
         return tuple(out)
+
+
+_OBJECT_STATES = (State.SEARCH_OBJECT, State.REACH_OBJECT)
 
 
 def confirmation_note(state: State) -> str:

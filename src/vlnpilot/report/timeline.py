@@ -23,7 +23,7 @@ INTERVENTION_KEYS = ("interventions",)
 
 # Recorded keys the page has no place for: shown raw ("other recorded fields"), as are keys the step record
 # does not know (a newer or a foreign writer's).
-SHOWN_RAW = ("override", "confirmation", "human", "robot")
+SHOWN_RAW = ("override", "confirmation", "human", "robot", "ranges")
 
 
 def known_keys() -> set[str]:

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.ranging import TT_TOF_BEYOND_MM
 from vlnpilot.core.records import Motion, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.emulator_video import VideoStreamer
@@ -51,6 +52,7 @@ class EmulatorConfig:
     fps: float = 15.0
     seed: int = 0
     keepalive_known: bool = False  # firmware before SDK 3.0 answers "unknown command: keepalive"
+    ext_tof: bool = False  # emulate a RoboMaster TT: `EXT tof?` answers the simulator's forward range, in mm
 
     def __post_init__(self) -> None:
         try:
@@ -92,7 +94,7 @@ class TelloEmulator:
         from vlnpilot.sim import SimConfig, Simulator
 
         self.config, self.clock = config or EmulatorConfig(), clock or WallClock()
-        self.sim = sim = Simulator(scene, SimConfig(render=False))
+        self.sim = sim = Simulator(scene, SimConfig(render=False, sensors="tof" if self.config.ext_tof else "none"))
         self._camera = (scene, SimConfig(width=width, height=height, rear_width=16, rear_height=16))
         self._viewer: Simulator | None = None  # created on the video thread
         spawn_obj = sim.scene.spawn(spawn) if spawn else sim.scene.spawns[0]
@@ -208,6 +210,8 @@ class TelloEmulator:
             return self._set_rc(args)
         if verb in QUERIES:
             return self._query(verb)
+        if text.strip().lower() == "ext tof?" and self.config.ext_tof:
+            return self._ext_tof()
         if verb == "keepalive" and self.config.keepalive_known:
             return "ok"
         if verb in ("streamon", "streamoff"):
@@ -278,6 +282,12 @@ class TelloEmulator:
                 "temp?": "60~62C", "attitude?": f"pitch:0;roll:0;yaw:{s['yaw']};", "baro?": f"{s['baro']:.2f}",
                 "tof?": f"{s['tof'] * 10}mm", "wifi?": "90", "sdk?": "20", "sn?": "0TQZEMULATOR01",
                 "acceleration?": "agx:0.00;agy:0.00;agz:-1000.00;"}[verb]
+
+    def _ext_tof(self) -> str:
+        """The TT's forward ToF from the simulator: 'tof MM', 8192 when nothing is within its range."""
+        with self._sim_lock:
+            (reading,) = self.sim.ranges()
+        return f"tof {TT_TOF_BEYOND_MM if reading.metres is None else round(reading.metres * 1000)}"
 
     # -- time: rc motion, battery, auto-land, state packets -------------------------------------------------
     def _integrate(self, now: float) -> None:

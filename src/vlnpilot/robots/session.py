@@ -6,6 +6,7 @@ import ipaddress
 import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -31,31 +32,41 @@ def check_robot(robot: str, tello_host: str | None) -> str:
     return key
 
 
-def robot_capabilities(robot: str) -> Capabilities:
+def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None = None) -> Capabilities:
+    """What `robot` senses when flown with `--sensors`; refuses (one line) a sensor it does not carry."""
+    from vlnpilot.core.environment import check_sensors
+    from vlnpilot.core.ranging import range_sensor
+
+    wanted = range_sensor(sensors)
     if robot == "tello":
-        from vlnpilot.robots.tello import TelloEnv
+        from vlnpilot.robots.tello import tello_capabilities
+        from vlnpilot.robots.tello_config import load_tello_config
 
-        return TelloEnv.capabilities
-    from vlnpilot.sim.simulator import Simulator
+        carried = tello_capabilities(load_tello_config(**({"host": tello_host} if tello_host else {})))
+        robot = "Tello" if carried.range_sensor == "tof" else "plain Tello (tello.yaml: ext_tof false)"
+    else:
+        from vlnpilot.sim.simulator import Simulator
 
-    return Simulator.capabilities
+        carried = replace(Simulator.capabilities, range_sensor=wanted.name if wanted else "none")  # any, simulated
+    check_sensors(carried, robot, sensors)
+    return replace(carried, range_sensor=wanted.name if wanted else "none")
 
 
 @contextmanager
 def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
-               operator: Any = None) -> Iterator[Any]:
+               operator: Any = None, sensors: str = "none") -> Iterator[Any]:
     """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened."""
     if robot == "sim":
-        from vlnpilot.sim import Simulator
+        from vlnpilot.sim import SimConfig, Simulator
 
-        with Simulator(scene) as env:
+        with Simulator(scene, SimConfig(sensors=sensors)) as env:
             yield env
         return
     from vlnpilot.robots.tello import TelloEnv
     from vlnpilot.robots.tello_config import load_tello_config
 
     config = load_tello_config(**({"host": tello_host} if tello_host else {}))
-    env = TelloEnv(scene, config, event_log=event_log, operator=operator)
+    env = TelloEnv(scene, config, event_log=event_log, operator=operator, sensors=sensors)
     try:
         yield env
     finally:

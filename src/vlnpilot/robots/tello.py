@@ -18,14 +18,16 @@ import json
 import signal
 import threading
 import time
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from vlnpilot.core.commands import Command, Kind, get_command
-from vlnpilot.core.environment import Capabilities
+from vlnpilot.core.environment import Capabilities, check_sensors
 from vlnpilot.core.errors import LinkLost, RobotHalt
+from vlnpilot.core.ranging import RangeReading, range_sensor, tof_reading
 from vlnpilot.core.records import Motion, Observation, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.operator import ConsoleOperator
@@ -39,6 +41,11 @@ SDK_MIN_CM = 20
 STREAMON_TRIES = 3  # `streamon` only starts the video: resending it when its reply is lost is safe
 
 
+def tello_capabilities(config: TelloConfig) -> Capabilities:
+    """What the drone the settings describe carries: a RoboMaster TT its forward ToF (`ext_tof`)."""
+    return replace(TelloEnv.capabilities, range_sensor="tof" if config.ext_tof else "none")
+
+
 class TelloEnv:
     """A DJI Tello behind the Environment protocol. One instance flies one episode; `close()` lands it."""
 
@@ -46,9 +53,14 @@ class TelloEnv:
 
     def __init__(self, scene: str | Scene = "cabin", config: TelloConfig | None = None, *,
                  clock: Clock | None = None, operator: ConsoleOperator | None = None,
-                 event_log: str | Path | None = None, handle_sigint: bool = True, link_clock: Clock | None = None):
+                 event_log: str | Path | None = None, handle_sigint: bool = True, link_clock: Clock | None = None,
+                 sensors: str = "none"):
         self.scene = load_scene(scene)
         self.config = config or load_tello_config()
+        check_sensors(tello_capabilities(self.config), "plain Tello (tello.yaml: ext_tof false)", sensors)
+        self.range_sensor = range_sensor(sensors)
+        if self.range_sensor is not None:  # flown with its ToF: the pilot is told its readings
+            self.capabilities = replace(TelloEnv.capabilities, range_sensor=self.range_sensor.name)
         self.clock = clock or WallClock()
         # The link's packets arrive in real time, so the watchdog judges their silence on the wall clock unless a
         # test drives it with a clock of its own.
@@ -70,6 +82,17 @@ class TelloEnv:
         self._step = 0
 
     # -- Environment -----------------------------------------------------------------------------------------
+    def ranges(self) -> tuple[RangeReading, ...]:
+        """The TT's forward ToF (`EXT tof?`, mm, 8192 beyond range); () without it or when no reply came."""
+        if self.range_sensor is None or self.link is None:
+            return ()
+        answer = self.link.send("EXT tof?", min(self.config.reply_timeout_s, 2.0))
+        try:
+            return (tof_reading(answer or "", self.range_sensor),)
+        except ValueError:
+            self._event("tof_unread", answer=answer)
+            return ()
+
     def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:
         """Connect, check the battery, start the video, take off, reach flight height; the first observation."""
         if self.link is not None:

@@ -60,6 +60,7 @@ class TelloConfig(_Strict):
     video_latency_s: float = Field(ge=0, le=5)
     link_silence_s: float = Field(gt=0, le=1.5)  # at most 1.5 s, so that `land` goes out within 2 s of a death
     land_confirm_s: float = Field(gt=0, le=10)
+    ext_tof: bool = False  # a RoboMaster TT (Tello Talent): its open-source controller answers `EXT tof?`
 
 
 def load_tello_config(path: str | Path | None = None, **overrides: Any) -> TelloConfig:

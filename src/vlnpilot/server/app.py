@@ -111,8 +111,8 @@ class DecideRequest(BaseModel):
     profile: Profile = Field(default="paper", description="FSM profile: which moves each state allows")
     feedback: list[str] = Field(default_factory=list, description="controller feedback lines for a re-ask",
                                 max_length=20)
-    context: list[str] = Field(default_factory=list, description="pilot context lines (odometry, budget, memory)",
-                               max_length=20)
+    context: list[str] = Field(default_factory=list, max_length=20,
+                               description="pilot context lines (odometry, budget, memory, range readings)")
     step: WholeNumber = Field(default=0, ge=0, le=1_000_000, description="step number in the episode")
     in_state: str | None = Field(default=None, max_length=1000,
                                  description="the moves flown in the current state, as the controller states them")

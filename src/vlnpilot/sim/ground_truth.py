@@ -5,7 +5,7 @@ from __future__ import annotations
 import math
 from typing import Protocol
 
-from vlnpilot.core.records import Motion, Pose, wrap_deg
+from vlnpilot.core.records import Footprint, Motion, Pose, wrap_deg
 from vlnpilot.scene import Scene
 
 VISIBLE_MIN_FRACTION = 0.004  # share of the (low-resolution) front image a target must cover to count as seen
@@ -52,6 +52,9 @@ class SimGroundTruth:
         p = self._sim.pose
         dx, dy = t.position[0] - p.x, t.position[1] - p.y
         return math.hypot(dx, dy), wrap_deg(math.degrees(math.atan2(dy, dx)) - p.yaw_deg)
+
+    def target_footprint(self, target_id: str) -> Footprint:
+        return self._sim.target_footprint(target_id)
 
     def target_pixel_fraction(self, target_id: str) -> float:
         key = (self._sim.step_count, self._sim.pose, target_id)

@@ -16,6 +16,7 @@ from gymnasium import spaces
 
 from vlnpilot.core.commands import COMMANDS, Command
 from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.ranging import RangeSensor
 from vlnpilot.core.records import Observation, Pose
 from vlnpilot.scene import Scene, Spawn, load_scene
 from vlnpilot.sim.simulator import SimConfig, Simulator
@@ -31,14 +32,16 @@ class CabinEnv(gym.Env):
     Options: `spawn` (name, Spawn or Pose; default the scene's first spawn; `reset(options={"spawn": ...})`
     overrides it for one episode), `goal_room` (room id or alias; optional, also a reset option), `max_steps`,
     `width`/`height` of the front image, `render_mode="rgb_array"` (`render()` returns the rear chase view),
-    `spawn_jitter_m`/`spawn_jitter_deg` (seeded spawn variety).
+    `spawn_jitter_m`/`spawn_jitter_deg` (seeded spawn variety), `sensors` (none, tof or multiranger: the
+    observation gains "ranges", metres per beam of `vlnpilot.core.ranging.SENSORS`, -1 beyond the sensor's range).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
 
     def __init__(self, scene: str | Scene = "cabin", *, spawn: str | Spawn | Pose | None = None,
                  goal_room: str | None = None, max_steps: int = 50, width: int = 640, height: int = 480,
-                 render_mode: str | None = None, spawn_jitter_m: float = 0.0, spawn_jitter_deg: float = 0.0):
+                 render_mode: str | None = None, spawn_jitter_m: float = 0.0, spawn_jitter_deg: float = 0.0,
+                 sensors: str = "none"):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
         if max_steps < 1:
@@ -52,7 +55,7 @@ class CabinEnv(gym.Env):
         rear = (width, height) if render_mode == "rgb_array" else (16, 16)
         self.sim = Simulator(self.scene, SimConfig(width=width, height=height, rear_width=rear[0],
                                                    rear_height=rear[1], spawn_jitter_m=spawn_jitter_m,
-                                                   spawn_jitter_deg=spawn_jitter_deg))
+                                                   spawn_jitter_deg=spawn_jitter_deg, sensors=sensors))
         self.commands: tuple[Command, ...] = tuple(COMMANDS.values())
 
         (xmin, ymin), (xmax, ymax) = self.scene.bounds
@@ -63,6 +66,7 @@ class CabinEnv(gym.Env):
             "front": spaces.Box(0, 255, (height, width, 3), np.uint8),
             "pose": spaces.Box(low, high, (4,), np.float32),
             "collided": spaces.Discrete(2),
+            **ranges_space(self.sim.range_sensor),
         })
         self._last: Observation | None = None
         self._steps = 0
@@ -132,13 +136,14 @@ class CabinEnv(gym.Env):
         self.sim.close()
 
     # -- helpers ------------------------------------------------------------------------------------------
-    @staticmethod
-    def _obs(obs: Observation) -> dict[str, Any]:
+    def _obs(self, obs: Observation) -> dict[str, Any]:
         p = obs.pose
+        ranges = {"ranges": np.array([-1.0 if r.metres is None else r.metres for r in self.sim.ranges()], np.float32)}
         return {
             "front": obs.front_rgb,
             "pose": np.array([p.x, p.y, p.z, p.yaw_deg], np.float32),
             "collided": int(obs.collided),
+            **(ranges if self.sim.range_sensor is not None else {}),
         }
 
     def _info(self, obs: Observation, room: str | None = None) -> dict[str, Any]:
@@ -151,6 +156,14 @@ class CabinEnv(gym.Env):
             "contact": obs.contact,
             "contact_part": obs.contact_part,
         }
+
+
+def ranges_space(sensor: RangeSensor | None) -> dict[str, spaces.Box]:
+    """The "ranges" observation of a drone with range sensors (one value per beam, -1: beyond range), else none."""
+    if sensor is None:
+        return {}
+    n = len(sensor.directions)
+    return {"ranges": spaces.Box(np.full(n, -1.0, np.float32), np.full(n, sensor.max_m, np.float32), (n,), np.float32)}
 
 
 def register() -> None:

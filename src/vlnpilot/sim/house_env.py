@@ -15,8 +15,9 @@ import numpy as np
 from gymnasium import spaces
 
 from vlnpilot.core.commands import COMMANDS
+from vlnpilot.core.ranging import range_sensor
 from vlnpilot.scene.houses import SEEDS, HouseSpec
-from vlnpilot.sim.gym_env import CabinEnv
+from vlnpilot.sim.gym_env import CabinEnv, ranges_space
 
 MAX_EXTENT_M = 40.0  # bound of the pose observation: larger than any generated house
 
@@ -25,9 +26,10 @@ class HouseEnv(gym.Env):
     metadata = CabinEnv.metadata
 
     def __init__(self, house: int = 0, rooms: int | None = None, *, max_steps: int = 150, width: int = 640,
-                 height: int = 480, render_mode: str | None = None):
+                 height: int = 480, render_mode: str | None = None, sensors: str = "none"):
         self._spec = HouseSpec(int(house), rooms)
-        self._kwargs = {"max_steps": max_steps, "width": width, "height": height, "render_mode": render_mode}
+        self._kwargs = {"max_steps": max_steps, "width": width, "height": height, "render_mode": render_mode,
+                        "sensors": sensors}
         self.render_mode = render_mode
         self._env: CabinEnv | None = None
         self.action_space = spaces.Discrete(len(COMMANDS))
@@ -35,7 +37,8 @@ class HouseEnv(gym.Env):
         high = np.array([MAX_EXTENT_M, MAX_EXTENT_M, 3.0, 180.0], np.float32)
         self.observation_space = spaces.Dict({"front": spaces.Box(0, 255, (height, width, 3), np.uint8),
                                               "pose": spaces.Box(low, high, (4,), np.float32),
-                                              "collided": spaces.Discrete(2)})
+                                              "collided": spaces.Discrete(2),
+                                              **ranges_space(range_sensor(sensors))})
 
     @property
     def house(self) -> str:

@@ -19,13 +19,15 @@ from vlnpilot.core.environment import (
     GroundTruth,
 )
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
-from vlnpilot.core.records import Motion, Observation, Pose  # noqa: E402
+from vlnpilot.core.ranging import RangeReading, range_sensor  # noqa: E402
+from vlnpilot.core.records import Footprint, Motion, Observation, Pose  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import (
     drone,  # noqa: E402
     gl,  # noqa: F401  (selects the headless GL backend before mujoco is imported)
 )
+from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
 
@@ -47,8 +49,11 @@ class SimConfig:
     shadows: bool = False  # MuJoCo's shadow map costs ~10x a frame on a CPU
     visibility_width: int = 160  # segmentation render used by the ground truth
     visibility_height: int = 120
+    sensors: str = "none"  # range sensors the drone carries (vlnpilot.core.ranging.SENSORS): none | tof | multiranger
+    range_noise: bool = True  # the sensor's modelled noise on each reading (off: exact ray-cast distances)
 
     def __post_init__(self) -> None:
+        range_sensor(self.sensors)  # a bad name is refused here, in one line
         max_w, max_h = MAX_RESOLUTION
         for w, h, what in ((self.width, self.height, "front"), (self.rear_width, self.rear_height, "rear")):
             if not (16 <= w <= max_w and 16 <= h <= max_h):
@@ -60,6 +65,32 @@ class SimConfig:
 def yaw_quat(yaw_deg: float) -> np.ndarray:
     half = math.radians(yaw_deg) / 2
     return np.array([math.cos(half), 0.0, 0.0, math.sin(half)])
+
+
+def _geom_outline(m: mujoco.MjModel, d: mujoco.MjData, geom: int) -> tuple[tuple[float, float], ...]:
+    """The floor outline (convex hull of the x, y of its 8 corners) of a geom's bounding box, in world frame."""
+    centre, half = m.geom_aabb[geom, :3], m.geom_aabb[geom, 3:]
+    signs = np.array([(i, j, k) for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], float)
+    corners = d.geom_xpos[geom] + (centre + signs * half) @ d.geom_xmat[geom].reshape(3, 3).T
+    return convex_hull([(float(x), float(y)) for x, y, _ in corners])
+
+
+def convex_hull(points: list[tuple[float, float]]) -> tuple[tuple[float, float], ...]:
+    """Andrew's monotone chain: the hull's corners counter-clockwise, without collinear ones."""
+    pts = sorted(set(points))
+    if len(pts) <= 2:
+        return tuple(pts)
+
+    def half(seq: list[tuple[float, float]]) -> list[tuple[float, float]]:
+        out: list[tuple[float, float]] = []
+        for p in seq:
+            while len(out) >= 2 and ((out[-1][0] - out[-2][0]) * (p[1] - out[-2][1])
+                                     - (out[-1][1] - out[-2][1]) * (p[0] - out[-2][0])) <= 1e-12:
+                out.pop()
+            out.append(p)
+        return out
+
+    return tuple(half(pts)[:-1] + half(pts[::-1])[:-1])
 
 
 class Simulator:
@@ -74,6 +105,9 @@ class Simulator:
         self.config = config or SimConfig()
         xml, assets = scene_to_mjcf(self.scene, bodies=drone.drone_body_xml(), assets_xml=drone.drone_assets_xml(),
                                     max_render=MAX_RESOLUTION, shadows=self.config.shadows)
+        self.range_sensor = range_sensor(self.config.sensors)
+        if self.range_sensor is not None:  # this drone carries range sensors: it says so
+            self.capabilities = replace(Simulator.capabilities, range_sensor=self.range_sensor.name)
         self.model = mujoco.MjModel.from_xml_string(xml, assets)
         self.data = mujoco.MjData(self.model)
         m = self.model
@@ -89,12 +123,14 @@ class Simulator:
             for t in self.scene.targets
         }
         self._world_aabb: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # for clearance_at
+        self._footprints: dict[str, Footprint] = {}
         self._drone_colliders: list[int] = []
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._seg_renderer: mujoco.Renderer | None = None
         self._pose = Pose(0.0, 0.0, self.scene.flight_altitude, 0.0)
         self._step = 0
         self._rng = np.random.default_rng(0)
+        self._range_rng = np.random.default_rng([0, 23])
         self.seed: int | None = None
         self.spawn: Spawn | None = None
 
@@ -212,6 +248,7 @@ class Simulator:
         self.spawn = spawn if isinstance(spawn, Spawn) else None
         self.seed = seed
         self._rng = np.random.default_rng(seed)
+        self._range_rng = np.random.default_rng([0 if seed is None else seed, 23])  # apart: spawns stay as seeded
         cfg = self.config
         if cfg.spawn_jitter_m or cfg.spawn_jitter_deg:
             dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
@@ -321,6 +358,24 @@ class Simulator:
             raise UnknownNameError("target", target_id, self.target_geoms)
         ids = self.segmentation()
         return float(np.isin(ids, list(self.target_geoms[target_id])).mean())
+
+    def ranges(self) -> tuple[RangeReading, ...]:
+        """The range sensors' readings at the current pose (`RangeSensing`); () without any."""
+        if self.range_sensor is None:
+            return ()
+        self._sync()
+        return read_ranges(self.model, self.data, self._pose, self.range_sensor, self._body_id,
+                           self._range_rng if self.config.range_noise else None)
+
+    def target_footprint(self, target_id: str) -> Footprint:
+        """Each of the target's geoms as the floor outline of its bounding box (world x, y, convex, CCW)."""
+        if target_id not in self.target_geoms:
+            raise UnknownNameError("target", target_id, self.target_geoms)
+        if target_id not in self._footprints:
+            mujoco.mj_kinematics(self.model, self.data)  # the world geoms' poses (static; the drone's is not read)
+            self._footprints[target_id] = tuple(_geom_outline(self.model, self.data, g)
+                                                for g in sorted(self.target_geoms[target_id]))
+        return self._footprints[target_id]
 
     def ground_truth(self) -> GroundTruth:  # a SimGroundTruth, imported lazily to keep the module graph simple
         from vlnpilot.sim.ground_truth import SimGroundTruth

@@ -19,7 +19,7 @@ from vlnpilot.core.records import Pose
 from vlnpilot.scene.geodesic import geodesic_length
 from vlnpilot.scene.model import Scene, _norm
 from vlnpilot.scene.validate import CLEARANCE_M, occupancy
-from vlnpilot.tasks.success import DEFAULT_SUCCESS, SuccessConfig
+from vlnpilot.tasks.success import DEFAULT_SUCCESS, SuccessConfig, object_view
 
 
 class QueryError(VLNPilotError, ValueError):
@@ -85,12 +85,8 @@ def judge(task: Task, final_state: State, gt: GroundTruth, config: SuccessConfig
         return ok, f"drone is in {room or 'no room'}; goal room {task.goal_room}"
     if final_state is not State.DESCRIBE_OBJECT:
         return False, f"declared {final_state.value} for an object goal"
-    dist, bearing = gt.target_distance_bearing(task.goal_target)
-    visible = gt.target_visible(task.goal_target)
-    ok = (dist <= config.object_distance_m and abs(bearing) <= config.object_facing_deg
-          and (visible or not config.object_must_be_visible))
-    return ok, (f"{task.goal_target} at {dist:.2f} m (max {config.object_distance_m}), bearing {bearing:+.0f}° "
-                f"(max ±{config.object_facing_deg:.0f}°), {'visible' if visible else 'not visible'}")
+    seen = object_view(gt, task.goal_target, config)
+    return seen.reached(config), seen.reason(task.goal_target, config)
 
 
 def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessConfig = DEFAULT_SUCCESS) -> float:
