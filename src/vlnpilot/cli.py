@@ -370,20 +370,21 @@ def main() -> None:
 
     Exit codes (vlnpilot.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 130 interrupted.
     """
-    # click's exception module, wherever this Typer keeps it (Typer >= 0.20 vendors click as typer._click)
-    click_errors = sys.modules[typer.BadParameter.__module__]
+    # Typer >= 0.29 (pinned in pyproject.toml) vendors click as typer._click; Abort lives in typer itself.
+    from typer._click.exceptions import ClickException, NoArgsIsHelpError
+
     try:
         code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
     except VLNPilotError as exc:
         _one_line_error(str(exc))
         sys.exit(2)
-    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:  # a bare `vln-pilot`: the help, as before
+    except NoArgsIsHelpError as exc:  # a bare `vln-pilot`: the help, as before
         exc.show()
         sys.exit(exc.exit_code)
-    except click_errors.ClickException as exc:
+    except ClickException as exc:
         _one_line_error(exc.format_message())
         sys.exit(exc.exit_code)
-    except (KeyboardInterrupt, click_errors.Abort):
+    except (KeyboardInterrupt, typer.Abort):
         err_console.print("interrupted: every step recorded so far is kept")
         sys.exit(130)
     sys.exit(code if isinstance(code, int) else 0)

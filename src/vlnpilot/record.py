@@ -182,7 +182,12 @@ def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]
     run_dir = Path(run_dir)
     if not (run_dir / SUMMARY).is_file():
         raise ConfigError(f"{run_dir} is not a run directory: {SUMMARY} is missing")
-    summary = json.loads((run_dir / SUMMARY).read_text())
+    try:
+        summary = json.loads((run_dir / SUMMARY).read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{run_dir / SUMMARY} is not valid JSON ({exc}); restore it or fly the run again") from None
+    if not isinstance(summary, dict):
+        raise ConfigError(f"{run_dir / SUMMARY} holds a {type(summary).__name__}, not a run summary (a JSON object)")
     steps = []
     if (run_dir / EPISODE).is_file():
         for line in (run_dir / EPISODE).read_text().splitlines():

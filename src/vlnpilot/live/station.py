@@ -23,6 +23,7 @@ from vlnpilot.pilots.base import Pilot
 from vlnpilot.record import load_run
 from vlnpilot.scene import load_scene
 from vlnpilot.server.app import is_loopback
+from vlnpilot.server.net import bind_socket
 
 TOKEN_ENV = "VLN_LIVE_TOKEN"
 DEFAULT_PORT = 8765
@@ -79,16 +80,7 @@ class LiveStation:
 
 
 def _bind(host: str, port: int) -> socket.socket:
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    sock = socket.socket(family, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((host, port))
-    except (OSError, OverflowError) as exc:
-        sock.close()
-        raise ConfigError(f"the live station cannot listen on {host}:{port} ({getattr(exc, 'strerror', None) or exc});"
-                          " choose another port, or another address") from None
-    sock.listen(16)
+    sock = bind_socket(host, port, "the live station")
     sock.set_inheritable(True)
     return sock
 
