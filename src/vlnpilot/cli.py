@@ -25,6 +25,7 @@ err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wr
 
 SceneOpt = Annotated[str, typer.Option("--scene", help="Scene name: cabin or house:SEED[?rooms=N&types=a,b].")]
 OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
+MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PilotOptionOpt = Annotated[list[str] | None, typer.Option(
     "--pilot-option", metavar="KEY=VALUE", help="A pilot option, e.g. detail=high or timeout=30 (repeatable).")]
 
@@ -99,7 +100,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         scene: SceneOpt = "cabin",
         spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
         pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC: name or name:model.")] = None,
-        max_steps: Annotated[int, typer.Option("--max-steps", min=1, help="Step limit.")] = 50,
+        max_steps: Annotated[int, typer.Option("--max-steps", min=1, max=MAX_STEPS, help="Step limit.")] = 50,
         seed: Annotated[int | None, typer.Option("--seed")] = None,
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
@@ -279,7 +280,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
-          max_steps: Annotated[int | None, typer.Option("--max-steps", min=1)] = None,
+          max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,
           workers: Annotated[int | None, typer.Option("--workers", min=1, help="Episodes in flight.")] = None,
           executor: Annotated[str, typer.Option("--executor", help="local, ray, inline or one a --plugin "
                                                 "registers.")] = "local",

@@ -28,6 +28,7 @@ import numpy as np
 from PIL import Image
 
 from vlnpilot.errors import ConfigError
+from vlnpilot.exits import shorten, undecodable
 from vlnpilot.fileio import write_atomic
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
@@ -59,6 +60,9 @@ def claim_run_dir(out: str | Path, *, overwrite: bool = False) -> Path:
 def check_writable(out: str | Path) -> Path:
     """Create `out` if needed and prove it is writable, or raise ConfigError naming the problem."""
     path = Path(out)
+    bad = undecodable(str(path))
+    if bad:
+        raise ConfigError(f"--out {shorten(str(path))!r} is not valid UTF-8 ({bad}); a report could not name it")
     if path.exists() and not path.is_dir():
         raise ConfigError(f"--out {path} exists and is not a directory")
     try:

@@ -41,6 +41,7 @@ from vlnpilot.server import images
 from vlnpilot.server.images import IMAGE_MIN_LENGTH, IMAGE_PATTERN, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE  # noqa: F401
 from vlnpilot.server.net import check_port_free
 from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, check_specs, refuse_privileged
+from vlnpilot.tasks import MAX_QUERY_CHARS
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +83,7 @@ class DecideRequest(BaseModel):
 
     image: str = Field(description="front camera image: base64 JPEG or PNG (a data: URL is accepted)",
                        min_length=IMAGE_MIN_LENGTH, pattern=IMAGE_PATTERN, json_schema_extra={"format": "base64-image"})
-    query: str = Field(description="the user's query", min_length=1, max_length=2000)
+    query: str = Field(description="the user's query", min_length=1, max_length=MAX_QUERY_CHARS)
     topological_map: dict[str, Any] = Field(description="rooms (nodes) and open doors (edges), as JSON")
     state: AskedState = Field(description="current FSM state (Start and Final are never asked)")
     previous_movement: CommandCode | None = Field(default=None, description="previous command code, or null")
