@@ -1,6 +1,6 @@
 """The server's image input: one definition for what the schema promises and what the decoder accepts.
 
-`IMAGE_PATTERN` is strict base64 (padded or not, standard or URL-safe alphabet) of a JPEG (/9j/) or a PNG
+`IMAGE_PATTERN` is strict base64 (padded or not, standard or URL-safe alphabet) of a JPEG (/9j/, _9j_) or a PNG
 (iVBORw0KGgo), optionally a data: URL; `IMAGE_MIN_LENGTH` is the base64 length of the smallest image the decoder
 accepts. The OpenAPI schema states both, and `decode_image` checks both first, so a string the schema refuses
 is refused by the decoder with the same words, and vice versa up to what no schema can say (a truncated JPEG).
@@ -31,8 +31,8 @@ PIXELS_IN_FLIGHT = 3 * MAX_IMAGE_PIXELS  # decoded and not yet answered: 80 MB o
 _B64 = "[A-Za-z0-9+/_-]"
 _TAIL = f"(?:{_B64}{{2}}(?:==)?|{_B64}{{3}}=?)?"  # the last 2 or 3 characters, padded or not
 # The prefixes are 4 and 11 characters long, so a PNG's first group of four ends one character after it.
-IMAGE_PATTERN = (rf"^(?:data:image/(?:jpeg|png);base64,)?(?:/9j/(?:{_B64}{{4}})*|iVBORw0KGgo{_B64}(?:{_B64}{{4}})*)"
-                 rf"{_TAIL}$")
+IMAGE_PATTERN = (rf"^(?:data:image/(?:jpeg|png);base64,)?"
+                 rf"(?:(?:/9j/|_9j_)(?:{_B64}{{4}})*|iVBORw0KGgo{_B64}(?:{_B64}{{4}})*){_TAIL}$")
 _IMAGE_RE = re.compile(IMAGE_PATTERN)
 _DECODES = threading.BoundedSemaphore(MAX_CONCURRENT_DECODES)
 _OBJECT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
