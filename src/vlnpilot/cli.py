@@ -174,7 +174,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
-                                        operator=operator) as env, _sigterm_interrupts():
+                                        operator=operator) as env:
         try:
             result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
                                           pilot_spec=pilot, overwrite=True,  # claimed above
@@ -231,7 +231,8 @@ def _say_remote_url(spec: str) -> None:
 
 @contextlib.contextmanager
 def _sigterm_interrupts():
-    """SIGTERM ends a run like Ctrl-C: the record is closed as 'interrupted' and the exit code is 130."""
+    """SIGTERM is handled as Ctrl-C (a KeyboardInterrupt): a run's record is closed as 'interrupted', a bench
+    stops its workers (which record their episodes in flight as 'interrupted'), and the exit code is 130."""
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
@@ -375,7 +376,8 @@ def main() -> None:
     from typer._click.exceptions import ClickException, NoArgsIsHelpError
 
     try:
-        code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
+        with _sigterm_interrupts():  # every command, from start-up on: SIGTERM is Ctrl-C
+            code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
     except VLNPilotError as exc:
         _one_line_error(str(exc))
         sys.exit(2)

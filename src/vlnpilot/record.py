@@ -19,6 +19,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import weakref
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -138,6 +139,7 @@ class Recorder:
         if save_frames:
             self.frames_dir.mkdir(exist_ok=True)
         self._episode = open(self.run_dir / EPISODE, "w", encoding="utf-8")  # noqa: SIM115 (closed in close())
+        _OPEN.add(self)
 
     def frame_paths(self, step: int) -> dict[str, str]:
         return {"front": f"{FRAMES}/front_{step:03d}.jpg", "rear": f"{FRAMES}/rear_{step:03d}.jpg"}
@@ -179,6 +181,19 @@ class Recorder:
             write_json_atomic(self.run_dir / SUMMARY, self._summary)
         if not self._episode.closed:
             self._episode.close()
+        _OPEN.discard(self)
+
+
+_OPEN: weakref.WeakSet[Recorder] = weakref.WeakSet()  # the records this process has not closed yet
+
+
+def close_open_records(status: str = "interrupted") -> int:
+    """Mark every record still open in this process `status` (a bench worker told to stop, whose episodes run
+    in threads that a signal cannot interrupt); returns how many."""
+    records = list(_OPEN)
+    for recorder in records:
+        recorder.close(status)
+    return len(records)
 
 
 def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
