@@ -130,7 +130,13 @@ def test_interrupting_the_video_leaves_no_temporary_file(monkeypatch, flown, tmp
 
     def interrupted_writer(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
         writer = real(*args, **kwargs)
-        writer.append_data = lambda frame: (_ for _ in ()).throw(KeyboardInterrupt())
+        append = writer.append_data
+
+        def once_then_interrupt(frame) -> None:  # noqa: ANN001 - ffmpeg starts (and creates the file) on frame 1
+            append(frame)
+            writer.append_data = lambda frame: (_ for _ in ()).throw(KeyboardInterrupt())
+
+        writer.append_data = once_then_interrupt
         return writer
 
     monkeypatch.setattr(imageio, "get_writer", interrupted_writer)
