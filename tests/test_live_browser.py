@@ -49,7 +49,7 @@ def shows_step(page, ep: LiveEpisode, n: int) -> None:  # noqa: ANN001
 def test_live_station_in_chromium(browser, tmp_path: Path) -> None:  # noqa: ANN001
     ep = LiveEpisode(tmp_path / "run")
     try:
-        page, errors = open_page(browser, ep.station.url)
+        page, errors = open_page(browser, ep.station.page_url)
         # step N's image and decision within 1 s of the step ending
         for n in (1, 2):
             ep.pilot.release(1)
@@ -98,7 +98,7 @@ def test_live_station_in_chromium(browser, tmp_path: Path) -> None:  # noqa: ANN
         page.close()
         ep.pilot.release(1)
         ep.wait_steps(11)
-        page, errors2 = open_page(browser, ep.station.url)
+        page, errors2 = open_page(browser, ep.station.page_url)
         shows_step(page, ep, 11)
         assert page.locator("#stepcount").text_content() == "step 11 / 40"
         assert page.locator("#traj circle").count() == 11

@@ -147,7 +147,8 @@ def test_413_streamed_body_without_content_length(client):
 @pytest.mark.parametrize(("overrides", "reason", "words"), [
     ({"image": "not base64 at all!!"}, "bad_request", "image"),  # the schema's pattern: base64 JPEG or PNG
     ({"image": base64.b64encode(b"GIF89a just a gif").decode()}, "bad_request", "image"),
-    ({"image": base64.b64encode(b"\xff\xd8\xff\xe0 truncated jpeg").decode()}, "bad_image", "cannot be decoded"),
+    ({"image": base64.b64encode(b"\xff\xd8\xff\xe0 truncated jpeg" * 6).decode()}, "bad_image", "cannot be decoded"),
+    ({"image": base64.b64encode(b"\xff\xd8\xff\xe0 truncated jpeg").decode()}, "bad_request", "image"),  # too short
     ({"state": "Flying Upside Down"}, "bad_request", "state"),
     ({"state": "Start"}, "bad_request", "state"),
     ({"previous_movement": "Z9"}, "bad_request", "previous_movement"),

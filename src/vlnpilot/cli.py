@@ -28,6 +28,7 @@ OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
 PROFILE_HELP = "FSM profile: paper, fast or ranged (fast, and A2 in Reach Object)."
 SensorsOpt = Annotated[str, typer.Option("--sensors", help="Range sensors the drone carries: none, tof (a RoboMaster "
                                          "TT's forward ToF) or multiranger (Crazyflie Multi-ranger deck).")]
+MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PilotOptionOpt = Annotated[list[str] | None, typer.Option(
     "--pilot-option", metavar="KEY=VALUE", help="A pilot option, e.g. detail=high or timeout=30 (repeatable).")]
 
@@ -102,7 +103,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         scene: SceneOpt = "cabin",
         spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
         pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC: name or name:model.")] = None,
-        max_steps: Annotated[int, typer.Option("--max-steps", min=1, help="Step limit.")] = 50,
+        max_steps: Annotated[int, typer.Option("--max-steps", min=1, max=MAX_STEPS, help="Step limit.")] = 50,
         seed: Annotated[int | None, typer.Option("--seed")] = None,
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
@@ -178,7 +179,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
-                                        operator=operator, sensors=sensors) as env, _sigterm_interrupts():
+                                        operator=operator, sensors=sensors) as env:
         try:
             result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
                                           pilot_spec=pilot, overwrite=True,  # claimed above
@@ -235,7 +236,8 @@ def _say_remote_url(spec: str) -> None:
 
 @contextlib.contextmanager
 def _sigterm_interrupts():
-    """SIGTERM ends a run like Ctrl-C: the record is closed as 'interrupted' and the exit code is 130."""
+    """SIGTERM is handled as Ctrl-C (a KeyboardInterrupt): a run's record is closed as 'interrupted', a bench
+    stops its workers (which record their episodes in flight as 'interrupted'), and the exit code is 130."""
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
@@ -284,7 +286,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
-          max_steps: Annotated[int | None, typer.Option("--max-steps", min=1)] = None,
+          max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,
           workers: Annotated[int | None, typer.Option("--workers", min=1, help="Episodes in flight.")] = None,
           executor: Annotated[str, typer.Option("--executor", help="local, ray, inline or one a --plugin "
                                                 "registers.")] = "local",
@@ -379,22 +381,24 @@ def main() -> None:
     Exit codes (vlnpilot.core.exits): 0 flown, 2 bad input, 3 pilot or provider failure, 4 robot link fault,
     130 interrupted.
     """
-    # click's exception module, wherever this Typer keeps it (Typer >= 0.20 vendors click as typer._click)
-    click_errors = sys.modules[typer.BadParameter.__module__]
+    # Typer >= 0.29 (pinned in pyproject.toml) vendors click as typer._click; Abort lives in typer itself.
+    from typer._click.exceptions import ClickException, NoArgsIsHelpError
+
     try:
-        code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
+        with _sigterm_interrupts():  # every command, from start-up on: SIGTERM is Ctrl-C
+            code = app(standalone_mode=False)  # usage errors come back here, to be printed in one line
     except VLNPilotError as exc:
         from vlnpilot.core.exits import error_exit_code
 
         _one_line_error(str(exc))
         sys.exit(error_exit_code(exc))
-    except getattr(click_errors, "NoArgsIsHelpError", ()) as exc:  # a bare `vln-pilot`: the help, as before
+    except NoArgsIsHelpError as exc:  # a bare `vln-pilot`: the help, as before
         exc.show()
         sys.exit(exc.exit_code)
-    except click_errors.ClickException as exc:
+    except ClickException as exc:
         _one_line_error(exc.format_message())
         sys.exit(exc.exit_code)
-    except (KeyboardInterrupt, click_errors.Abort):
+    except (KeyboardInterrupt, typer.Abort):
         err_console.print("interrupted: every step recorded so far is kept")
         sys.exit(130)
     sys.exit(code if isinstance(code, int) else 0)

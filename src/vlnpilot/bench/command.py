@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.bench.executors import BenchError
+from vlnpilot.bench.manifest import MANIFEST
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 from vlnpilot.core.ranging import range_sensor
 
@@ -45,6 +46,9 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         if resume:
             raise BenchError("--resume needs --out: the bench directory to resume")
         out = default_run_dir("runs", f"bench-{Path(str(suite)).stem}")
+    elif resume and not (Path(out) / MANIFEST).is_file():
+        raise BenchError(f"--resume --out {out}: there is no bench there to resume (no {MANIFEST}); give the "
+                         "directory of an earlier bench, or drop --resume to start one")
     settings = BenchSettings(
         suite=suite, pilots=pilots if isinstance(pilots, str) else tuple(pilots), out=out, reps=reps,
         max_steps=max_steps, seed=seed,

@@ -32,6 +32,7 @@ from typing import Any, Protocol
 
 from vlnpilot.bench.episode_job import EpisodeSpec, Event, SimulatorCache, import_plugins, run_guarded
 from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
+from vlnpilot.core.exits import INTERRUPTED
 from vlnpilot.core.registry import Registry
 
 
@@ -152,10 +153,19 @@ def _die_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="parent-watchdog", daemon=True).start()
 
 
+def _interrupted(signum: int, frame: object) -> None:
+    """SIGTERM in a worker: its episodes run in threads, which no signal reaches; close their records, then go."""
+    from vlnpilot.core.rundir import close_open_records
+
+    close_open_records("interrupted")
+    os._exit(INTERRUPTED)
+
+
 def _worker_main(tasks: Any, events: Any, threads: int, parent_pid: int, plugins: Sequence[str]) -> None:
     """Entry point of a local worker process: `threads` threads take specs from the shared queue."""
     _die_with_parent(parent_pid)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's business; it terminates us
+    signal.signal(signal.SIGTERM, _interrupted)  # ... and then the episodes in flight are recorded `interrupted`
     name = f"{socket.gethostname()}:{os.getpid()}"
     try:
         import_plugins(plugins)

@@ -31,6 +31,7 @@ from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dic
 from vlnpilot.bench.tables import render_tables
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.exits import shorten
 from vlnpilot.core.fileio import write_atomic
 from vlnpilot.core.fsm import PROFILES
 from vlnpilot.core.rundir import check_writable, default_run_dir, git_sha, package_versions
@@ -95,9 +96,16 @@ class PilotEntry:
 def parse_pilots(pilots: str | Sequence[str]) -> tuple[str, ...]:
     """'oracle, openai:gpt-4.1' or a list -> ('oracle', 'openai:gpt-4.1'); duplicates and blanks refused."""
     items = pilots.split(",") if isinstance(pilots, str) else list(pilots)
-    specs = [str(p).strip() for p in items if str(p).strip()]
-    if not specs:
+    specs = [str(p).strip() for p in items]
+    if not any(specs):
         raise ConfigError("--pilots needs at least one pilot SPEC (name or name:model)")
+    if not all(specs):
+        raise ConfigError(f"--pilots {shorten(str(pilots))!r} has an empty SPEC; write SPECs separated by single "
+                          "commas, e.g. oracle,openai:gpt-4.1")
+    from vlnpilot.pilots.base import check_spec_syntax
+
+    for spec in specs:
+        check_spec_syntax(spec)
     dupes = sorted({p for p in specs if specs.count(p) > 1})
     if dupes:
         raise ConfigError(f"pilot(s) given twice: {', '.join(dupes)}")

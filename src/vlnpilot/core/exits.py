@@ -43,7 +43,24 @@ def check_base_url(url: str | None, option: str = "--base-url") -> str | None:
     if parts.scheme not in ("http", "https") or not parts.hostname:
         raise ConfigError(f"{option} must be an http:// or https:// URL with a host, e.g. http://127.0.0.1:8000/v1; "
                           f"got {shorten(url)!r}")
+    try:
+        parts.port  # noqa: B018 - urllib checks the range (0..65535) only when it is read
+    except ValueError:
+        raise ConfigError(f"{option} has a port outside 1..65535, e.g. http://127.0.0.1:8000/v1; "
+                          f"got {shorten(url)!r}") from None
+    if parts.port == 0:
+        raise ConfigError(f"{option} has port 0; a server listens on 1..65535; got {shorten(url)!r}")
     return url.strip()
+
+
+def undecodable(text: str) -> str | None:
+    """Where `text` holds bytes that were not UTF-8 (Python keeps them as surrogates), else None."""
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError as exc:
+        raw = text[exc.start:exc.end].encode("utf-8", "surrogateescape")
+        return f"byte {raw[:1].hex(' ')} at character {exc.start + 1}"
+    return None
 
 
 def shorten(text: str, limit: int = 80) -> str:

@@ -19,6 +19,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import weakref
 from datetime import UTC, datetime
 from importlib import metadata
 from pathlib import Path
@@ -28,6 +29,7 @@ import numpy as np
 from PIL import Image
 
 from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.exits import shorten, undecodable
 from vlnpilot.core.fileio import write_atomic
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
@@ -59,6 +61,9 @@ def claim_run_dir(out: str | Path, *, overwrite: bool = False) -> Path:
 def check_writable(out: str | Path) -> Path:
     """Create `out` if needed and prove it is writable, or raise ConfigError naming the problem."""
     path = Path(out)
+    bad = undecodable(str(path))
+    if bad:
+        raise ConfigError(f"--out {shorten(str(path))!r} is not valid UTF-8 ({bad}); a report could not name it")
     if path.exists() and not path.is_dir():
         raise ConfigError(f"--out {path} exists and is not a directory")
     try:
@@ -134,6 +139,7 @@ class Recorder:
         if save_frames:
             self.frames_dir.mkdir(exist_ok=True)
         self._episode = open(self.run_dir / EPISODE, "w", encoding="utf-8")  # noqa: SIM115 (closed in close())
+        _OPEN.add(self)
 
     def frame_paths(self, step: int) -> dict[str, str]:
         return {"front": f"{FRAMES}/front_{step:03d}.jpg", "rear": f"{FRAMES}/rear_{step:03d}.jpg"}
@@ -175,6 +181,19 @@ class Recorder:
             write_json_atomic(self.run_dir / SUMMARY, self._summary)
         if not self._episode.closed:
             self._episode.close()
+        _OPEN.discard(self)
+
+
+_OPEN: weakref.WeakSet[Recorder] = weakref.WeakSet()  # the records this process has not closed yet
+
+
+def close_open_records(status: str = "interrupted") -> int:
+    """Mark every record still open in this process `status` (a bench worker told to stop, whose episodes run
+    in threads that a signal cannot interrupt); returns how many."""
+    records = list(_OPEN)
+    for recorder in records:
+        recorder.close(status)
+    return len(records)
 
 
 def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
@@ -182,7 +201,12 @@ def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]
     run_dir = Path(run_dir)
     if not (run_dir / SUMMARY).is_file():
         raise ConfigError(f"{run_dir} is not a run directory: {SUMMARY} is missing")
-    summary = json.loads((run_dir / SUMMARY).read_text())
+    try:
+        summary = json.loads((run_dir / SUMMARY).read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{run_dir / SUMMARY} is not valid JSON ({exc}); restore it or fly the run again") from None
+    if not isinstance(summary, dict):
+        raise ConfigError(f"{run_dir / SUMMARY} holds a {type(summary).__name__}, not a run summary (a JSON object)")
     steps = []
     if (run_dir / EPISODE).is_file():
         for line in (run_dir / EPISODE).read_text().splitlines():

@@ -12,7 +12,6 @@
 from __future__ import annotations
 
 import asyncio
-import hmac
 import json
 import re
 from importlib import resources
@@ -26,6 +25,7 @@ from pydantic import BaseModel, Field
 from vlnpilot.core.rundir import FRAMES
 from vlnpilot.live.control import LiveControl, Refused
 from vlnpilot.live.feed import RunFeed
+from vlnpilot.live.guard import StationGuard, token_ok
 from vlnpilot.live.plan import plan_png, state_colors
 
 POLL_S = 0.1  # how often a connection looks for new steps: well within the 1 s the page has to show one
@@ -45,12 +45,15 @@ class ControlMessage(BaseModel):
 
 
 def create_live_app(run_dir: Path, *, control: LiveControl | None = None, token: str | None = None,
-                    scene: Any | None = None) -> FastAPI:
-    """The app for `run_dir`; with `control` the page can pause, stop and fly, else it only watches."""
+                    scene: Any | None = None, host: str = "127.0.0.1") -> FastAPI:
+    """The app for `run_dir`; with `control` the page can pause, stop and fly, else it only watches.
+
+    `host` is the address it is served on: the guard (live/guard.py) answers only the Host names it stands for."""
     run_dir = Path(run_dir).resolve()
     run_id = run_dir.name
     plan, bounds = plan_png(scene) if scene is not None else (None, None)
     app = FastAPI(title="VLN-Pilot live station", docs_url=None, redoc_url=None, openapi_url=None)
+    app.add_middleware(StationGuard, host=host, token=token)  # Host, Origin, token and body size, before the app
 
     @app.get("/", include_in_schema=False)
     def page() -> Response:
@@ -87,7 +90,7 @@ def create_live_app(run_dir: Path, *, control: LiveControl | None = None, token:
 
     @app.post("/api/control")
     def act(message: ControlMessage, authorization: str | None = Header(default=None)) -> JSONResponse:
-        if token is not None and not _token_ok(authorization, token):
+        if token is not None and not token_ok(authorization, token):  # the guard checked it already: kept as a 2nd lock
             return JSONResponse({"error": "missing or wrong token (Authorization: Bearer ...)"}, status_code=401)
         if control is None:
             return JSONResponse({"error": "this station only watches the run"}, status_code=404)
@@ -106,11 +109,6 @@ def _static(name: str) -> Response:
     media = {"html": "text/html", "css": "text/css", "js": "text/javascript"}[name.rsplit(".", 1)[1]]
     text = resources.files("vlnpilot.live").joinpath("static", name).read_text(encoding="utf-8")
     return Response(text, media_type=f"{media}; charset=utf-8", headers={"Cache-Control": "no-store"})
-
-
-def _token_ok(authorization: str | None, token: str) -> bool:
-    scheme, _, given = (authorization or "").partition(" ")
-    return scheme.lower() == "bearer" and hmac.compare_digest(given.strip().encode(), token.encode())
 
 
 def _event(kind: str, data: str) -> str:

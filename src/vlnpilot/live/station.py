@@ -1,13 +1,15 @@
 """Serve the live app: in a background thread beside a flying episode (`run --live`), or until Ctrl-C (`watch`).
 
 The socket is bound here, before uvicorn starts, so that a port in use or a bad address is one clear error.
-Off loopback a token is required (env VLN_LIVE_TOKEN); control messages then need it too.
+A station that controls a run always has a token (env VLN_LIVE_TOKEN, else a fresh one per run), shown in the
+address it prints; off loopback even a read-only station needs one. See live/guard.py for what is checked.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import secrets
 import socket
 import threading
 from collections.abc import Callable, Iterator
@@ -23,6 +25,7 @@ from vlnpilot.live.control import LiveControl
 from vlnpilot.pilots.base import Pilot
 from vlnpilot.scene import load_scene
 from vlnpilot.server.app import is_loopback
+from vlnpilot.server.net import bind_socket
 
 TOKEN_ENV = "VLN_LIVE_TOKEN"
 DEFAULT_PORT = 8765
@@ -34,14 +37,16 @@ class LiveStation:
     def __init__(self, run_dir: Path, *, control: LiveControl | None = None, scene: Any | None = None,
                  host: str = "127.0.0.1", port: int = DEFAULT_PORT, token: str | None = None):
         token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
-        if token is None and not is_loopback(host):
+        if token is None and not is_loopback(host):  # a choice to expose the station: the operator's own token
             raise ConfigError(f"the live station on {host} without a token would let anyone who reaches it fly "
                               f"the drone; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or bind 127.0.0.1")
+        if token is None and control is not None:  # even on loopback: any local process could fly otherwise
+            token = secrets.token_urlsafe(16)
         self.token = token
         self._socket = _bind(host, port)
         self.port = self._socket.getsockname()[1]
         self.host = host
-        app = create_live_app(run_dir, control=control, token=token, scene=scene)
+        app = create_live_app(run_dir, control=control, token=token, scene=scene, host=host)
         config = uvicorn.Config(app, log_level="warning", lifespan="off", timeout_graceful_shutdown=2)
         self._server = uvicorn.Server(config)
         self._started = threading.Event()
@@ -52,6 +57,11 @@ class LiveStation:
     def url(self) -> str:
         host = f"[{self.host}]" if ":" in self.host else self.host
         return f"http://{host}:{self.port}/"
+
+    @property
+    def page_url(self) -> str:
+        """The page's address with the token after '#' (the page reads it there; a fragment is never sent)."""
+        return self.url + (f"#token={self.token}" if self.token else "")
 
     @property
     def native_id(self) -> int | None:
@@ -79,16 +89,7 @@ class LiveStation:
 
 
 def _bind(host: str, port: int) -> socket.socket:
-    family = socket.AF_INET6 if ":" in host else socket.AF_INET
-    sock = socket.socket(family, socket.SOCK_STREAM)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-    try:
-        sock.bind((host, port))
-    except (OSError, OverflowError) as exc:
-        sock.close()
-        raise ConfigError(f"the live station cannot listen on {host}:{port} ({getattr(exc, 'strerror', None) or exc});"
-                          " choose another port, or another address") from None
-    sock.listen(16)
+    sock = bind_socket(host, port, "the live station")
     sock.set_inheritable(True)
     return sock
 
@@ -99,8 +100,7 @@ def live_control(run_dir: Path, pilot: Pilot, scene: Any, *, host: str, port: in
     """`run --live`: the station beside the episode; yields the control to give run_episode."""
     control = LiveControl(pilot)
     with LiveStation(run_dir, control=control, scene=scene, host=host, port=port) as station:
-        say(f"live station: {station.url}" + ("  (control needs #token=<VLN_LIVE_TOKEN> after the address)"
-                                              if station.token else ""))
+        say(f"live station: {station.page_url}  (the address holds this run's token: share it only with who may fly)")
         try:
             yield control
         finally:

@@ -8,7 +8,7 @@ from typing import Any, Protocol, runtime_checkable
 
 from vlnpilot.core.decision import NO_TRAITS, Decision, PilotInput, PilotTraits, traits_of
 from vlnpilot.core.environment import GroundTruth
-from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 
@@ -134,6 +134,16 @@ def parse_spec(spec: str) -> tuple[str, str | None]:
     return name.strip().lower(), (model.strip() or None)
 
 
+def check_spec_syntax(spec: str) -> None:
+    """ConfigError for a SPEC that names no pilot, or a ':' with no model after it ('openai:')."""
+    name, sep, model = str(spec).strip().partition(":")
+    if not name.strip():
+        raise ConfigError(f"pilot SPEC {spec!r} names no pilot; write NAME or NAME:MODEL, e.g. openai:gpt-4.1")
+    if sep and not model.strip():
+        raise ConfigError(f"pilot SPEC {spec!r} has nothing after ':'; write {name.strip()} for its default "
+                          f"model, or {name.strip()}:MODEL")
+
+
 def registration(name: str) -> Registration:
     """The registration of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
     return PILOT_REGISTRY.get(name)
@@ -154,6 +164,7 @@ def make_pilot(spec: str, **options: Any) -> Pilot:
 
     A bad name lists the known pilots; a bad option is one ConfigError line with the valid option names.
     """
+    check_spec_syntax(spec)
     name, model = parse_spec(spec)
     entry = registration(name)
     if model is not None:

@@ -8,7 +8,9 @@ a half-size copy for places that cannot play video (a README, an issue).
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -206,17 +208,31 @@ def write_episode_video(run_dir: str | Path, *, fps: float = 2.0, gif: bool = Tr
     ep = episode or load_episode(run_dir)
     frames = episode_frames(ep)
     mp4 = run_dir / MP4
-    tmp = run_dir / (MP4 + ".tmp.mp4")
-    writer = imageio.get_writer(tmp, fps=fps, codec="libx264", quality=6, pixelformat="yuv420p",
-                                macro_block_size=16, ffmpeg_log_level="error",
-                                output_params=["-preset", "veryfast", "-movflags", "+faststart"])
-    try:
-        for f in frames:
-            writer.append_data(f)
-        for _ in range(max(0, hold_last - 1)):
-            writer.append_data(frames[-1])
-    finally:
-        writer.close()
-    tmp.replace(mp4)
-    gif_path = _write_gif(frames, run_dir / GIF, fps=fps, width=gif_width, hold=hold_last) if gif else None
+    with _written_through(run_dir / f".{MP4}.tmp.mp4", mp4) as tmp:  # ffmpeg reads the format off the suffix
+        writer = imageio.get_writer(tmp, fps=fps, codec="libx264", quality=6, pixelformat="yuv420p",
+                                    macro_block_size=16, ffmpeg_log_level="error",
+                                    output_params=["-preset", "veryfast", "-movflags", "+faststart"])
+        try:
+            for f in frames:
+                writer.append_data(f)
+            for _ in range(max(0, hold_last - 1)):
+                writer.append_data(frames[-1])
+        finally:
+            writer.close()
+    gif_path = None
+    if gif:
+        with _written_through(run_dir / f".{GIF}.tmp.gif", run_dir / GIF) as tmp:
+            gif_path = _write_gif(frames, tmp, fps=fps, width=gif_width, hold=hold_last).with_name(GIF)
     return mp4, gif_path
+
+
+@contextlib.contextmanager
+def _written_through(tmp: Path, final: Path) -> Iterator[Path]:
+    """Write `tmp`, then move it onto `final`; whatever stops the writing (Ctrl-C, SIGTERM, a full disk)
+    leaves neither a half file nor the temporary one."""
+    try:
+        yield tmp
+        tmp.replace(final)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise

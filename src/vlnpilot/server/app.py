@@ -16,15 +16,13 @@ on the client side.
 from __future__ import annotations
 
 import base64
-import binascii
 import contextlib
 import hmac
 import io
 import ipaddress
 import logging
 import os
-import re
-from collections.abc import AsyncIterator, Callable, Collection
+from collections.abc import AsyncIterator, Callable, Collection, Iterator
 from typing import Annotated, Any, Literal
 
 import numpy as np
@@ -42,16 +40,20 @@ from vlnpilot.core.fsm import ASKED_STATES, PROFILES, parse_state
 from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
 from vlnpilot.pilots.base import Pilot, PilotError, make_pilot
 from vlnpilot.pilots.options import MAX_HISTORY
-from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, refuse_privileged
+from vlnpilot.server import images
+from vlnpilot.server.images import (
+    IMAGE_MIN_LENGTH,
+    IMAGE_PATTERN,
+    MAX_IMAGE_SIDE,  # noqa: F401
+)
+from vlnpilot.server.net import check_port_free
+from vlnpilot.server.pool import DEFAULT_MAX_CACHED, PilotPool, check_specs, refuse_privileged
+from vlnpilot.tasks.task import MAX_QUERY_CHARS
 
 log = logging.getLogger(__name__)
 
 TOKEN_ENV = "VLN_PILOT_TOKEN"
 DEFAULT_MAX_BODY_BYTES = 8 * 1024 * 1024
-MAX_IMAGE_SIDE = 4096
-# What an image must look like: base64 of a JPEG (/9j/) or a PNG (iVBORw0KGgo), optionally as a data: URL.
-# In the schema too, so that the documented contract and the validation agree.
-IMAGE_PATTERN = r"^(data:image/(jpeg|png);base64,)?(/9j/|iVBORw0KGgo)[A-Za-z0-9+/=_\-\s]*$"
 
 
 # ------------------------------------------------------------------------------------------ wire models
@@ -103,8 +105,8 @@ class DecideRequest(BaseModel):
         "previous_movement": None}]})
 
     image: str = Field(description="front camera image: base64 JPEG or PNG (a data: URL is accepted)",
-                       min_length=8, pattern=IMAGE_PATTERN, json_schema_extra={"format": "base64-image"})
-    query: str = Field(description="the user's query", min_length=1, max_length=2000)
+                       min_length=IMAGE_MIN_LENGTH, pattern=IMAGE_PATTERN, json_schema_extra={"format": "base64-image"})
+    query: str = Field(description="the user's query", min_length=1, max_length=MAX_QUERY_CHARS)
     topological_map: dict[str, Any] = Field(description="rooms (nodes) and open doors (edges), as JSON")
     state: AskedState = Field(description="current FSM state (Start and Final are never asked)")
     previous_movement: CommandCode | None = Field(default=None, description="previous command code, or null")
@@ -221,48 +223,23 @@ class BodyLimitMiddleware:
 
 # ------------------------------------------------------------------------------------------ decoding
 
+@contextlib.contextmanager
+def _image_errors() -> Iterator[None]:
+    """A bad image is a 422 on the field `image`, in the shape of the schema's own field errors."""
+    try:
+        yield
+    except images.BadImage as exc:
+        raise ApiError(422, str(exc), "bad_image", fatal=True,
+                       errors=[{"loc": ["body", "image"], "msg": str(exc), "type": "bad_image"}]) from None
+
+
 def decode_image(data: str) -> np.ndarray:
     """A base64 JPEG or PNG (optionally a data: URL) as an HxWx3 uint8 RGB array; ApiError 422 otherwise."""
-    from PIL import Image, UnidentifiedImageError
-
-    text = data.strip()
-    if text.startswith("data:"):
-        head, _, text = text.partition(",")
-        if ";base64" not in head:
-            raise ApiError(422, "image data URL must be base64-encoded", "bad_image")
-    try:
-        raw = base64.b64decode(text, validate=True)
-    except (binascii.Error, ValueError):
-        try:
-            raw = base64.urlsafe_b64decode(text + "=" * (-len(text) % 4))
-        except (binascii.Error, ValueError):
-            raise ApiError(422, "image is not valid base64", "bad_image") from None
-    if raw[:3] == b"\xff\xd8\xff":
-        kind = "JPEG"
-    elif raw[:8] == b"\x89PNG\r\n\x1a\n":
-        kind = "PNG"
-    else:
-        raise ApiError(422, "image must be a base64 JPEG or PNG", "bad_image")
-    try:
-        with Image.open(io.BytesIO(raw)) as img:
-            if img.format != kind:
-                raise ApiError(422, f"image claims {kind} but decodes as {img.format}", "bad_image")
-            if max(img.size) > MAX_IMAGE_SIDE or min(img.size) < 1:
-                raise ApiError(422, f"image is {img.width}x{img.height}; each side must be 1..{MAX_IMAGE_SIDE}",
-                               "bad_image")
-            rgb = np.asarray(img.convert("RGB"), dtype=np.uint8)
-    except ApiError:
-        raise
-    except (UnidentifiedImageError, OSError, ValueError, SyntaxError, Image.DecompressionBombError) as exc:
-        why = _OBJECT_REPR.sub("the image", str(exc)) or type(exc).__name__  # no '<_io.BytesIO object at 0x...>'
-        raise ApiError(422, f"image cannot be decoded as {kind}: {why}", "bad_image") from None
-    return np.ascontiguousarray(rgb)
+    with _image_errors():
+        return images.decode_image(data)
 
 
-_OBJECT_REPR = re.compile(r"<[\w.]+ object at 0x[0-9a-fA-F]+>")
-
-
-def _pilot_input(req: DecideRequest) -> PilotInput:
+def _pilot_input(req: DecideRequest, image: np.ndarray) -> PilotInput:
     try:
         state = parse_state(req.state)
     except UnknownNameError as exc:
@@ -280,7 +257,6 @@ def _pilot_input(req: DecideRequest) -> PilotInput:
             raise ApiError(422, str(exc), "bad_movement") from None
     else:
         previous = None
-    image = decode_image(req.image)
     # Always a tuple: a pilot of the server (shared by its clients) never keeps a conversation of its own.
     history = tuple(_earlier_turn(t) for t in req.history or ())
     return PilotInput(image=image, query=req.query, topological_map=req.topological_map, state=state,
@@ -334,6 +310,7 @@ def create_app(
     app.add_middleware(BodyLimitMiddleware, max_bytes=max_body_bytes)
     app.state.pilot_spec = pilot_spec
     app.state.pilots = pool
+    pixels = images.PixelBudget()
     _document_allowed_pilots(app, pool.allowed)
     bearer = HTTPBearer(auto_error=False, description=f"the server's token (env {TOKEN_ENV})")
 
@@ -345,11 +322,15 @@ def create_app(
             raise ApiError(401, "missing or wrong bearer token" + (f" (set {TOKEN_ENV} on the client)"),
                            "unauthorized", fatal=True, headers={"WWW-Authenticate": "Bearer"})
 
-    def get_pilot(requested: str | None) -> Pilot:
+    def allowed_spec(requested: str | None) -> str:
+        """The allowed SPEC a request names (403 otherwise): checked before anything costs memory."""
         spec = pool.resolve((requested or pilot_spec).strip())
         if spec is None:
             raise ApiError(403, f"pilot {(requested or '')[:80]!r} is not served here; allowed: "
                                 f"{', '.join(pool.allowed)}", "pilot_not_allowed", fatal=True)
+        return spec
+
+    def get_pilot(spec: str) -> Pilot:
         try:
             return pool.get(spec)
         except UnknownNameError as exc:
@@ -395,21 +376,30 @@ def create_app(
               dependencies=[Depends(check_token)] if token is not None else [])  # declare auth only when it is on
     def decide(req: DecideRequest) -> DecideResponse:
         """Ask the pilot for one decision (a blocking provider call, run in the worker thread pool)."""
-        pilot_input = _pilot_input(req)
-        pilot = get_pilot(req.pilot)
-        try:
-            decision = pilot.decide(pilot_input)
-        except PilotError as exc:
-            raise _pilot_error(exc) from None
-        except VLNPilotError as exc:
-            raise ApiError(502, f"the pilot failed: {exc}", "pilot_error") from None
-        except Exception as exc:
-            log.exception("pilot %r crashed", req.pilot or pilot_spec)
-            raise ApiError(502, f"the pilot crashed ({type(exc).__name__})", "pilot_crashed") from None
-        return DecideResponse(**decision.core(), usage=decision.usage, model=decision.model or pilot.model,
-                              raw_text=decision.raw_text)
+        spec = allowed_spec(req.pilot)  # the cheap checks first: a refused pilot never has its image decoded
+        with _image_errors():
+            header = images.read_header(req.image)  # format and size from the header, bounded
+        with pixels.hold(header.pixels):  # until the answer: a slow provider call keeps its image alive
+            with _image_errors():
+                pilot_input = _pilot_input(req, images.decode(header))
+            return _ask(get_pilot(spec), pilot_input, req.pilot or pilot_spec)
 
     return app
+
+
+def _ask(pilot: Pilot, pilot_input: PilotInput, spec: str) -> DecideResponse:
+    """One decision of a built pilot, its failures as ApiErrors."""
+    try:
+        decision = pilot.decide(pilot_input)
+    except PilotError as exc:
+        raise _pilot_error(exc) from None
+    except VLNPilotError as exc:
+        raise ApiError(502, f"the pilot failed: {exc}", "pilot_error") from None
+    except Exception as exc:
+        log.exception("pilot %r crashed", spec)
+        raise ApiError(502, f"the pilot crashed ({type(exc).__name__})", "pilot_crashed") from None
+    return DecideResponse(**decision.core(), usage=decision.usage, model=decision.model or pilot.model,
+                          raw_text=decision.raw_text)
 
 
 def _document_allowed_pilots(app: FastAPI, allowed: list[str]) -> None:
@@ -467,5 +457,7 @@ def serve(host: str = "127.0.0.1", port: int = 8000, pilot_spec: str = "openai",
     if token is None and not is_loopback(host):
         raise ConfigError(f"serving on {host} without a token would let anyone who reaches it spend your API "
                           f"credit; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or bind --host 127.0.0.1")
+    check_specs([pilot_spec, *app_options.get("allowed_pilots", ())])  # one line for a pilot it could never serve
     app = create_app(token=token, pilot_spec=pilot_spec, **app_options)
+    check_port_free(host, port, "the pilot server")  # one line, not uvicorn's log and exit 1
     uvicorn.run(app, host=host, port=port, log_level=log_level)

@@ -14,7 +14,7 @@ from typing import Any
 
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError, UnknownNameError
-from vlnpilot.pilots.base import Pilot, close_pilot, parse_spec, pilot_factory, pilot_options_class
+from vlnpilot.pilots.base import Pilot, check_spec_syntax, close_pilot, parse_spec, pilot_factory, pilot_options_class
 
 DEFAULT_MAX_CACHED = 8
 
@@ -28,6 +28,15 @@ def canonical_spec(spec: str) -> str:
         except UnknownNameError:
             model = None
     return f"{name}:{model}" if model else name
+
+
+def check_specs(specs: Iterable[str]) -> None:
+    """Before a server starts: every SPEC names a registered pilot (UnknownNameError lists them), a model after
+    a ':' (ConfigError), and no pilot that needs ground truth (`refuse_privileged`)."""
+    for spec in specs:
+        check_spec_syntax(spec)
+        pilot_factory(parse_spec(spec)[0])
+    refuse_privileged(specs)
 
 
 def refuse_privileged(specs: Iterable[str]) -> None:

@@ -50,9 +50,25 @@ def _mentions(text: str, names: tuple[str, ...]) -> int:
     return best
 
 
+MAX_QUERY_CHARS = 2000  # the pilot server's limit too (server.app.DecideRequest): a run must fit through it
+
+
+def check_query_text(query: str) -> None:
+    """QueryError for a query no pilot could be sent: over MAX_QUERY_CHARS, or bytes that are not UTF-8."""
+    from vlnpilot.core.exits import shorten, undecodable
+
+    if len(query) > MAX_QUERY_CHARS:
+        raise QueryError(f"the query is {len(query)} characters; the limit is {MAX_QUERY_CHARS} "
+                         f"(the pilot server's): {shorten(query)!r}")
+    bad = undecodable(query)
+    if bad:
+        raise QueryError(f"the query is not valid UTF-8 ({bad}); retype it, or set a UTF-8 locale")
+
+
 def parse_query(query: str, scene: Scene) -> Task:
     """Turn a free-form query into a Task. Unknown rooms or objects raise QueryError listing the known ones."""
     from vlnpilot.core.exits import shorten
+    check_query_text(query)
     text = _norm(query)
     if not text:
         raise QueryError("the query is empty; try e.g. 'Go to the bedroom' or 'Find the mirror in the bedroom'")
