@@ -96,6 +96,13 @@ def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessC
     For a room goal the path ends 0.1 m inside the goal room; for an object it ends on the target's facing
     axis, 0.2 m inside the success distance. Furniture is ignored, so this is a lower bound.
     """
+    pts = shortest_path_points(scene, start, task, config)
+    return sum(math.dist(p, q) for p, q in zip(pts, pts[1:], strict=False))
+
+
+def shortest_path_points(scene: Scene, start: Pose, task: Task,
+                         config: SuccessConfig = DEFAULT_SUCCESS) -> list[tuple[float, float]]:
+    """The corners of `shortest_path_length`'s path, the start first (a mission chains them stage by stage)."""
     start_room = scene.room_at(start.x, start.y)
     pts = [(start.x, start.y)]
     if start_room is not None and start_room != task.goal_room:
@@ -111,7 +118,7 @@ def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessC
         d = config.object_distance_m - 0.2
         a = math.radians(t.facing_deg)
         pts.append((t.position[0] + d * math.cos(a), t.position[1] + d * math.sin(a)))
-    return sum(math.dist(p, q) for p, q in zip(pts, pts[1:], strict=False))
+    return pts
 
 
 # -- metrics (reset / update / value) -----------------------------------------------------------------
