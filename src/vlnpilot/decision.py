@@ -96,6 +96,10 @@ class PilotInput:
     profile: str = "paper"  # FSM profile: which moves each state allows
     feedback: tuple[str, ...] = ()  # validation errors of a re-ask, shield and oscillation notes
     context: tuple[str, ...] = ()  # pilot context beyond the paper (vlnpilot.context): odometry, budget, memory
+    # A mission of several stages (vlnpilot.mission: Mission.to_dict()) and the current stage (0-based); None for
+    # a one-stage mission, whose prompt is the paper's.
+    mission: Mapping[str, Any] | None = None
+    stage: int = 0
 
 
 class DecisionError(VLNPilotError):

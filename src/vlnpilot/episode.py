@@ -29,12 +29,13 @@ from vlnpilot.episode_measures import EpisodeEnd, EpisodeResult, EpisodeStart, M
 from vlnpilot.episode_record import EpisodeRecording, StepCallback, StepRecord
 from vlnpilot.errors import ConfigError, RobotHalt
 from vlnpilot.fsm import FINAL_STATES, PROFILES, State, parse_state
+from vlnpilot.mission import Mission, MissionProgress, as_mission, mission_budget
 from vlnpilot.overrides import override_reason
 from vlnpilot.pilots.base import Pilot
 from vlnpilot.record import Recorder
 from vlnpilot.safety import OVERLAYS, SHIELDS, SafetyConfig, SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
-from vlnpilot.tasks import SuccessConfig, Task, judge
+from vlnpilot.tasks import SuccessConfig, Task
 from vlnpilot.types import GroundTruth, Observation, Pose
 
 __all__ = ["OUTCOMES", "EpisodeConfig", "EpisodeResult", "Gate", "LoopControl", "StepCallback", "run_episode"]
@@ -127,18 +128,23 @@ class _End:
     judged_by: str | None = None  # None: by ground truth if there is any, else nobody
 
 
-def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
+def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
                 judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
-    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given. Without ground
-    truth (a real robot) a final state is a success as declared, unless `judge_outcome` (the operator) rules."""
+    """Fly one episode of `task` (a Task, or a Mission of stages) from `spawn` with `pilot`; record it if a
+    recorder is given. Without ground truth (a real robot) a final state is a success as declared, unless
+    `judge_outcome` (the operator) rules. A stage judged a success hands over to the next one from Recognize
+    Room; a stage judged a failure ends the mission. The budget is `config.max_steps` per stage, shared."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
-    safety, measures, recording, asker = _start(env, pilot, task, config, obs, recorder, on_step, spawn, pilot_spec)
+    progress = MissionProgress(_resolved(as_mission(task), env, obs, gt))
+    max_steps = mission_budget(config.max_steps, progress.mission)
+    safety, measures, recording, asker = _start(env, pilot, progress.mission, config, obs, recorder, on_step, spawn,
+                                                pilot_spec, max_steps)
     state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
-    for step in range(1, config.max_steps + 1):
+    for step in range(1, max_steps + 1):
         gate = control.before_step(step)
         if gate.abort is not None:
             end = _End("aborted", gate.abort)
@@ -152,25 +158,38 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
         pose_before, (obs, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
         measures.update(StepFacts(tuple(answer.usages), answer.valid, verdict.command, pose_before, obs.pose))
-        recording.step(_flown(step, state, answer, verdict, pose_before, obs, gt, measures, config.profile))
+        progress.saw(gt.room() if gt is not None else None)
+        recording.step(_flown(step, state, answer, verdict, pose_before, obs, gt, measures, config.profile,
+                              None if progress.mission.is_single else progress.stage + 1))
         asker.flown(step, state, answer, verdict.command, verdict.next_state, verdict.feedback)
         end = _stopped(halt, obs, answer, asker.failed_streak, config.max_failed_steps)
-        if end is None:  # the FSM moves on; a final state ends the episode, judged
+        if end is None:  # the FSM moves on; a final state ends the stage, judged
             state = verdict.next_state
-            end = _judged(task, state, gt, config, judge_outcome) if state in FINAL_STATES else None
+            end = _judged(progress, state, gt, config, judge_outcome) if state in FINAL_STATES else None
+            if end is not None and end.outcome == "success" and not progress.last:  # on to the next stage
+                progress.advance(step)
+                asker.stage, state, end = progress.stage, State.RECOGNIZE_ROOM, None
         if end is not None:
             break
     asker.close()
-    end = end or _End("max_steps", f"no final state within {config.max_steps} steps")
-    result = _result(end, steps, state, gt, measures.values(EpisodeEnd(end.outcome, safety)), t_start)
+    end = end or _End("max_steps", progress.prefix(False, f"no final state within {max_steps} steps"))
+    stages_reached = len(progress.boundaries) + (end.outcome == "success")
+    measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries)))
+    result = _result(end, steps, state, gt, measured, t_start)
     recording.finish(result, obs.pose, safety)
     _tell_pilot_the_outcome(pilot, result)
     return result
 
 
-def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, obs: Observation,
+def _resolved(mission: Mission, env: Environment, obs: Observation, gt: GroundTruth | None) -> Mission:
+    """A return stage points at the room the drone takes off in."""
+    start_room = gt.room() if gt is not None else env.scene.room_at(obs.pose.x, obs.pose.y)
+    return mission.resolved(start_room)
+
+
+def _start(env: Environment, pilot: Pilot, task: Mission, config: EpisodeConfig, obs: Observation,
            recorder: Recorder | None, on_step: StepCallback | None, spawn: str | Spawn | None,
-           pilot_spec: str | None) -> tuple[SafetyLayer, Measures, EpisodeRecording, PilotAsker]:
+           pilot_spec: str | None, max_steps: int) -> tuple[SafetyLayer, Measures, EpisodeRecording, PilotAsker]:
     """Before the first step: seed the pilot, reset the safety layer and the measures, write the run's header."""
     _reseed(pilot, config.seed)
     safety = make_safety(config.shield, env, env.scene, config.safety)
@@ -180,7 +199,7 @@ def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, ob
     recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
     _tell_pilot_the_episode(pilot, env.scene, config)
-    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map())
+    return safety, measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map(), max_steps)
 
 
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
@@ -222,13 +241,14 @@ def _execute(env: Environment, safety: SafetyLayer, command: Command,
 
 
 def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, pose_before: Pose,
-           obs: Observation, gt: GroundTruth | None, measures: Measures, profile: str) -> StepRecord:
+           obs: Observation, gt: GroundTruth | None, measures: Measures, profile: str,
+           stage: int | None = None) -> StepRecord:
     """The record of an executed step; `override` says why a command outside the state's moves ran."""
     override = override_reason(state, profile, verdict.command, not answer.valid, verdict.interventions,
                                verdict.next_state)
     return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, verdict.command,
                       verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
-                      override, answer.confirmation)
+                      override, answer.confirmation, stage)
 
 
 def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, failed_streak: int,
@@ -243,16 +263,17 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
     return None
 
 
-def _judged(task: Task, state: State, gt: GroundTruth | None, config: EpisodeConfig,
+def _judged(progress: MissionProgress, state: State, gt: GroundTruth | None, config: EpisodeConfig,
             judge_outcome: JudgeOutcome | None) -> _End:
-    """A declared final state: judged by ground truth, by the operator, or taken as declared."""
+    """A declared final state: the current stage judged by ground truth, by the operator, or taken as declared."""
     if gt is None and judge_outcome is not None:
-        ok, reason = judge_outcome(task, state)
-        return _End("success" if ok else "false_success", reason, judged_by="operator")
+        ok, reason = judge_outcome(progress.task, state)
+        return _End("success" if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
     if gt is None:
-        return _End("success", "final state declared (no ground truth to judge it)", judged_by="declared")
-    ok, why = judge(task, state, gt, config.success)
-    return _End("success" if ok else "false_success", why)
+        return _End("success", progress.prefix(True, "final state declared (no ground truth to judge it)"),
+                    judged_by="declared")
+    ok, why = progress.judge(state, gt, config.success)
+    return _End("success" if ok else "false_success", progress.prefix(ok, why))
 
 
 def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measured: dict[str, Any],

@@ -18,6 +18,7 @@ from vlnpilot.commands import Command
 from vlnpilot.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.decision import Decision, DecisionError, PilotInput, Usage, normalize_decision, validate_decision
 from vlnpilot.fsm import FINAL_STATES, State, parse_state
+from vlnpilot.mission import Mission, as_mission
 from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Pilot, PilotError
@@ -119,11 +120,15 @@ def needs_confirmation(context: ContextConfig, decision: Decision | None, asked:
 class PilotAsker:
     """Asks the episode's pilot (or a person taking a step over) and remembers what the next prompt needs."""
 
-    def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any):
+    def __init__(self, pilot: Pilot, task: Task | Mission, config: EpisodeConfig, topological_map: Any,
+                 max_steps: int | None = None):
         self.pilot, self.task, self.config, self.topo = pilot, task, config, topological_map
+        mission = as_mission(task)
+        self.mission = None if mission.is_single else mission.to_dict()  # a one-stage prompt stays the paper's
+        self.stage = 0  # the mission's current stage (the episode moves it on)
         bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
-        self.context = PilotContext(config.context, config.max_steps)
+        self.context = PilotContext(config.context, max_steps or config.max_steps)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
         self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)
@@ -142,7 +147,8 @@ class PilotAsker:
         while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=self.task.query, topological_map=self.topo, state=state,
                              previous_movement=self.previous, step=step, profile=config.profile,
-                             feedback=tuple(feedback), context=context_lines)
+                             feedback=tuple(feedback), context=context_lines, mission=self.mission,
+                             stage=self.stage)
             answer = ask(flier, pin, state, config.profile, step_end - time.monotonic())
             attempt += 1
             out.usages.append(answer.usage)

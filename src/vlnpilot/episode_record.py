@@ -17,6 +17,7 @@ from vlnpilot.context import context_name
 from vlnpilot.decision import Decision
 from vlnpilot.environment import Environment, capabilities_of
 from vlnpilot.fsm import State
+from vlnpilot.mission import Mission, mission_budget
 from vlnpilot.pilots.base import Pilot
 from vlnpilot.pilots.keyboard import HUMAN
 from vlnpilot.prompting import prompt_hash
@@ -49,6 +50,7 @@ class StepRecord:
     verdict: SafetyVerdict | None = None
     override: str | None = None  # why an executed command outside the state's allowed moves ran
     confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
+    stage: int | None = None  # the mission's stage (1-based) this step flew, for a mission of several stages
 
     def to_dict(self) -> dict[str, Any]:
         record = {key: value(self) for key, value in ALWAYS_WRITTEN.items()}
@@ -91,6 +93,7 @@ WRITTEN_WHEN_SET: dict[str, Callable[[StepRecord], Any]] = {
     "confirmation": lambda r: r.confirmation,  # the exchange before a final state (confirm_final)
     "human": lambda r: True if r.decision is not None and r.decision.model == HUMAN else None,  # the live station
     "robot": lambda r: r.obs.info or None,  # a real robot's facts: frame age, battery, safety events
+    "stage": lambda r: r.stage,  # a mission of several stages: the stage flown (the report marks boundaries)
 }
 FRAMES = "frames"  # added by `EpisodeRecording.step` when the run is recorded: the step's frame files
 
@@ -106,14 +109,16 @@ class EpisodeRecording:
     def __init__(self, recorder: Recorder | None, on_step: StepCallback | None):
         self.recorder, self.on_step = recorder, on_step
 
-    def start(self, env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, *, spawn_id: str | None,
+    def start(self, env: Environment, pilot: Pilot, task: Mission, config: EpisodeConfig, *, spawn_id: str | None,
               pilot_spec: str | None, safety: SafetyLayer, obs: Observation) -> None:
         if self.recorder is None:
             return
         scene = env.scene
         frames = self.recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
         self.recorder.start({
-            "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
+            "task": asdict(Task(task.query, task.goal_room, task.goal_target)), "spawn": spawn_id,
+            "scene": scene.name, **({} if task.is_single else {"mission": {
+                **task.to_dict(), "max_steps": mission_budget(config.max_steps, task)}}),
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
                        "context": {"preset": context_name(config.context), **config.context.to_dict()},

@@ -72,7 +72,7 @@ class Mission:
     @property
     def is_single(self) -> bool:
         """One stage and nothing to avoid: today's Task, flown and prompted exactly as before."""
-        return len(self.stages) == 1 and not self.avoid and self.stages[0].kind != "return"
+        return len(self.stages) == 1 and not self.avoid and not self.not_goals and self.stages[0].kind != "return"
 
     def task(self, k: int = 0) -> Task:
         """Stage k as the Task the judge, the oracle and SPL read (stage 0 of a single mission: today's Task)."""

@@ -5,8 +5,9 @@ The grammar, on the normalised instruction (lower case, `_-/` as spaces, the end
 
 1. Every room and object name of the scene (ids, names, aliases; the longest first) is masked as one token, so
    that "living room and kitchen" or "living room/kitchen" stay one name.
-2. The rest is cut into clauses at `;`, commas, "and then", "then", "after that", "afterwards", "and", and
-   before "without" / "avoiding". Leading fillers (and, then, please, first, next, finally, but) are dropped.
+2. The rest is cut into clauses at sentence ends, `;`, commas, "and then", "then", "after that", "afterwards",
+   "and", and before "without", "avoiding", "but", "don't", "do not", "never". Leading fillers (and, then,
+   please, first, next, finally, but) are dropped.
 3. Each clause is one of:
    - avoid:     "don't go to X", "do not enter X", "avoid X", "stay out of X", "without going through X", "never X"
                 -> X (rooms only) is avoided for the whole mission;
@@ -30,12 +31,12 @@ from dataclasses import dataclass
 from vlnpilot.exits import shorten
 from vlnpilot.mission import Mission, PlanError, Stage, offers
 from vlnpilot.scene.model import Scene, _norm
-from vlnpilot.tasks import _FIND_WORDS, parse_query
+from vlnpilot.tasks import _FIND_WORDS, QueryError, parse_query
 
 _TOKEN = re.compile(r"@(\d+)@")
-_SPLIT = re.compile(r"\s*(?:;|,\s*and then\b|,\s*then\b|,\s*after that\b|,\s*afterwards\b|,\s*and\b|,|"
+_SPLIT = re.compile(r"\s*(?:;|[.!?]\s+|,\s*and then\b|,\s*then\b|,\s*after that\b|,\s*afterwards\b|,\s*and\b|,|"
                     r"\band then\b|\bthen\b|\bafter that\b|\bafterwards\b|\band\b|(?=\bwithout\b)|"
-                    r"(?=\bavoiding\b)|(?=\bbut not\b))\s*")
+                    r"(?=\bavoiding\b)|(?=\bbut\b)|(?=\b(?:don't|do not|never)\b))\s*")
 _FILLER = re.compile(r"^(?:and|then|please|first|next|finally|lastly|but|also|now|ok|okay)\b\s*")
 _AVOID = re.compile(r"^(?:don t|don't|dont|do not|never|avoid|avoiding|stay out of|keep out of|"
                     r"without (?:going|passing|flying|entering)|(?:but )?not (?:through|via|into))\b")
@@ -108,8 +109,12 @@ def parse_mission(query: str, scene: Scene) -> Mission:
     if len(clauses) == 1 and not (_AVOID.match(clauses[0]) or _NOT.match(clauses[0])
                                   or _RETURN.search(clauses[0]) or _LANDMARK.match(clauses[0])
                                   or _GOAL_VIA.match(clauses[0])):
-        _goal(clauses[0], names, query, scene)  # the same refusals as a clause of a longer instruction
-        return Mission.from_task(parse_query(query, scene))  # today's reading, byte for byte
+        try:
+            task = parse_query(query, scene)  # today's reading and refusals, byte for byte
+        except QueryError as exc:
+            raise PlanError(str(exc)) from None
+        _goal(clauses[0], names, query, scene)  # and the refusals of a clause of a longer one (two rooms, ...)
+        return Mission.from_task(task)
     stages: list[Stage] = []
     avoid: list[str] = []
     not_goals: list[str] = []

@@ -46,6 +46,7 @@ class EpisodeSpec:
     save_frames: bool = True
     spawn_jitter_m: float = 0.0
     spawn_jitter_deg: float = 0.0
+    mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict); None: the goal above
 
 
 @dataclass(frozen=True)
@@ -140,6 +141,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     """Fly and record one episode; the results.jsonl record (without the parent's fields)."""
     from vlnpilot.episode import EpisodeConfig
     from vlnpilot.episode_run import run_recorded_episode
+    from vlnpilot.mission import Mission
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.prompting import prompt_hash
     from vlnpilot.record import git_sha
@@ -151,7 +153,8 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
         shutil.rmtree(run_dir)
     config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
-    task = Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target)
+    task = (Mission.from_dict(spec.mission) if spec.mission is not None
+            else Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target))
     result = run_recorded_episode(sim, pilot, task, config, run_dir=run_dir, spawn=spec.spawn,
                                   pilot_spec=spec.pilot, save_frames=spec.save_frames and spec.render)
     return {

@@ -202,7 +202,7 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                     query=row.query, goal_room=row.goal_room, goal_target=row.goal_target, max_steps=suite.max_steps,
                     profile=suite.profile, run_dir=str((out / rel).resolve()), run_dir_rel=rel.as_posix(),
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
-                    render=settings.render, save_frames=settings.save_frames,
+                    render=settings.render, save_frames=settings.save_frames, mission=row.mission,
                     spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg))
     return specs
 

@@ -14,6 +14,16 @@
 `goal` is optional: the query is always parsed with `tasks.parse_query`, and a goal given in the row must agree
 with it (so a parser change can never silently change what a suite measures). `goal: bathroom` is short for
 `goal: {room: bathroom}`. The built-in `paper` suite is the paper's Table 4.
+
+A mission suite (`missions`, `missions-houses`; docs/missions.md) reads each query with the mission parser
+(`mission.plan_mission`) against the row's spawn, and a row may record the expected plan, which must agree:
+
+      - {id: bath-back, spawn: living_room, query: "Go to the bathroom, then come back",
+         plan: {stages: [{room: bathroom}, {return: living_room}]}}
+      - {id: piano, spawn: living_room, query: Find the piano, refuse: no known object}
+
+A row with `refuse` must be refused before take-off with a message containing it; it is never flown
+(`Suite.refused`).
 """
 
 from __future__ import annotations
@@ -30,13 +40,15 @@ import yaml
 from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
 from vlnpilot.errors import ConfigError, VLNPilotError
 from vlnpilot.fsm import PROFILES
+from vlnpilot.mission import Mission, PlanError, plan_mission
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
-from vlnpilot.tasks import Task, parse_query
+from vlnpilot.tasks import Task
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
              "spawn_labels", "rows")
-_ROW_KEYS = ("id", "spawn", "query", "goal", "scene")  # a row's own scene overrides the suite's (house suites)
+# a row's own scene overrides the suite's (house suites); plan / refuse: what a mission suite expects
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "plan", "refuse")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -58,15 +70,30 @@ class SuiteRow:
     goal_room: str
     goal_target: str | None = None
     scene: str | None = None  # this row's scene when it differs from the suite's (e.g. 'house:7')
+    mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict), resolved at the spawn
 
     @property
-    def task(self) -> Task:
+    def task(self) -> Task | Mission:
+        if self.mission is not None:
+            return Mission.from_dict(self.mission)
         return Task(query=self.query, goal_room=self.goal_room, goal_target=self.goal_target)
 
     def canonical(self) -> dict[str, Any]:
         out = {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
                "goal_target": self.goal_target}
-        return {**out, "scene": self.scene} if self.scene else out
+        out = {**out, "scene": self.scene} if self.scene else out
+        return {**out, "plan": Mission.from_dict(self.mission).plan()} if self.mission else out
+
+
+@dataclass(frozen=True)
+class RefusedRow:
+    """A suite row that must be refused before take-off, and the refusal it got."""
+
+    id: str
+    spawn: str
+    query: str
+    refusal: str
+    scene: str | None = None
 
 
 @dataclass(frozen=True)
@@ -83,6 +110,7 @@ class Suite:
     spawn_labels: dict[str, str] = field(default_factory=dict)
     description: str = ""
     source: str = ""  # 'builtin:paper' or the file path, for the manifest
+    refused: tuple[RefusedRow, ...] = ()  # rows refused before take-off, as the suite expects (never flown)
 
     def row(self, row_id: str) -> SuiteRow:
         for r in self.rows:
@@ -211,6 +239,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
             errors.append(f"spawn_labels: unknown spawn {spawn!r}; valid spawns: {', '.join(valid_spawns)}")
     raw_rows = data.get("rows")
     rows: list[SuiteRow] = []
+    refused: list[RefusedRow] = []
     if not isinstance(raw_rows, list) or not raw_rows:
         errors.append("'rows' must be a non-empty list of {spawn, query, goal} rows")
         raw_rows = []
@@ -218,6 +247,9 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     for i, raw in enumerate(raw_rows, 1):
         row = _row(i, raw, scene, errors)
         if row is None:
+            continue
+        if isinstance(row, RefusedRow):
+            refused.append(row)
             continue
         if row.id in seen:
             errors.append(f"row {i} ({row.id}): the id is also used by row {seen[row.id]}; row ids must be unique")
@@ -229,10 +261,10 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     return Suite(name=str(data.get("name") or default_name), rows=tuple(rows), scene=scene.name, repetitions=reps,
                  max_steps=max_steps, seed=seed, profile=profile, spawn_jitter_m=jm, spawn_jitter_deg=jd,
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
-                 description=str(data.get("description") or ""), source=source)
+                 description=str(data.get("description") or ""), source=source, refused=tuple(refused))
 
 
-def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
+def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | RefusedRow | None:
     if not isinstance(raw, dict):
         errors.append(f"row {i}: expected a mapping with spawn, query and goal, got {raw!r}")
         return None
@@ -255,11 +287,12 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
     if not isinstance(query, str) or not query.strip():
         errors.append(f"{where}: 'query' must be a non-empty string, got {query!r}")
         return None
-    try:
-        task = parse_query(query, scene)
-    except VLNPilotError as exc:
-        errors.append(f"{where}: {exc}")
+    if spawn not in valid_spawns:
         return None
+    mission = _planned(raw, where, scene, row_scene is not None, errors)
+    if not isinstance(mission, Mission):
+        return mission
+    task = mission.task(len(mission.stages) - 1)
     goal = raw.get("goal")
     if goal is not None:
         if isinstance(goal, str):
@@ -288,7 +321,30 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
     if len(errors) > before:
         return None
     return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target,
-                    scene=scene.name if row_scene is not None else None)
+                    scene=scene.name if row_scene is not None else None,
+                    mission=None if mission.is_single else mission.to_dict())
+
+
+def _planned(raw: dict[str, Any], where: str, scene: Scene, own_scene: bool,
+             errors: list[str]) -> Mission | RefusedRow | None:
+    """The row's mission as the parser plans it at its spawn, checked against its `plan` or `refuse`."""
+    spawn, query = raw["spawn"], raw["query"]
+    try:
+        mission = plan_mission(query, scene, scene.spawn(spawn).room)
+    except VLNPilotError as exc:
+        if isinstance(raw.get("refuse"), str) and isinstance(exc, PlanError) and raw["refuse"] in str(exc):
+            return RefusedRow(id=str(raw.get("id") or _slug(f"{spawn}-{query}")), spawn=spawn, query=query,
+                              refusal=str(exc), scene=scene.name if own_scene else None)
+        errors.append(f"{where}: {exc}")
+        return None
+    if raw.get("refuse") is not None:
+        errors.append(f"{where}: the suite expects a refusal ({raw['refuse']!r}) but {query!r} plans to "
+                      f"{mission.plan()}")
+        return None
+    if raw.get("plan") is not None and raw["plan"] != mission.plan():
+        errors.append(f"{where}: the plan says {raw['plan']} but the query {query!r} plans to {mission.plan()}")
+        return None
+    return mission
 
 
 def _slug(text: str) -> str:
