@@ -117,7 +117,7 @@ class EpisodeRecording:
         frames = self.recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
         self.recorder.start({
             "task": asdict(Task(task.query, task.goal_room, task.goal_target)), "spawn": spawn_id,
-            "scene": scene.name, **({} if task.is_single else {"mission": {
+            "scene": scene.name, **({} if not task.recorded else {"mission": {
                 **task.to_dict(), "max_steps": mission_budget(config.max_steps, task)}}),
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,

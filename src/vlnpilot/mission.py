@@ -63,11 +63,17 @@ class Mission:
     avoid: tuple[str, ...] = ()  # rooms the drone must never enter ("don't go to the bathroom")
     not_goals: tuple[str, ...] = ()  # rooms or objects the instruction names as not wanted ("not the bathroom")
     source: str = "parser"  # parser | the pilot that planned it
+    planning: tuple[dict[str, Any], ...] = field(default=(), compare=False)  # the planning calls (pilots/planning)
 
     @classmethod
     def from_task(cls, task: Task) -> Mission:
         kind: StageKind = "object" if task.goal_target else "room"
         return cls(query=task.query, stages=(Stage(kind, task.goal_room, task.goal_target, task.query),))
+
+    @property
+    def recorded(self) -> bool:
+        """Whether a run's header records the mission: several stages, or a plan that a pilot made."""
+        return not self.is_single or self.source != "parser"
 
     @property
     def is_single(self) -> bool:
@@ -113,14 +119,15 @@ class Mission:
         return {"query": self.query, "source": self.source, "avoid": list(self.avoid),
                 "not_goals": list(self.not_goals),
                 "stages": [{"kind": s.kind, "room": s.room, "target": s.target, "words": s.words}
-                           for s in self.stages]}
+                           for s in self.stages], **({"planning": list(self.planning)} if self.planning else {})}
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Mission:
         stages = tuple(Stage(s["kind"], s.get("room"), s.get("target"), s.get("words", ""))
                        for s in data["stages"])
         return cls(query=data["query"], stages=stages, avoid=tuple(data.get("avoid") or ()),
-                   not_goals=tuple(data.get("not_goals") or ()), source=data.get("source", "parser"))
+                   not_goals=tuple(data.get("not_goals") or ()), source=data.get("source", "parser"),
+                   planning=tuple(data.get("planning") or ()))
 
     def describe(self) -> str:
         """One line per stage, for `vln-pilot plan` and the console."""

@@ -83,9 +83,10 @@ class AnthropicPilot(ModelPilot):
             "system": [self._text(prompt.system, cache=True)],
             "messages": [{"role": "user", "content": [
                 self._text(prompt.context, cache=True),
-                self._text(prompt.state_prompt, cache=True),
-                {"type": "image", "source": {"type": "base64", "media_type": "image/jpeg",
-                                             "data": base64.b64encode(prompt.image_jpeg).decode("ascii")}},
+                *([self._text(prompt.state_prompt, cache=True)] if prompt.state_prompt else []),
+                *([{"type": "image", "source": {"type": "base64", "media_type": "image/jpeg",
+                                                "data": base64.b64encode(prompt.image_jpeg).decode("ascii")}}]
+                  if prompt.image_jpeg else []),  # the planning call has no image and no state prompt
                 self._text(prompt.step_text),
             ]}],
             "tools": [tool],

@@ -160,11 +160,10 @@ class GeminiPilot(ModelPilot):
     def _contents(self, prompt: Any) -> list[types.Content]:
         # Stable parts first (implicit caching keys on the prefix); the image and the step text last.
         return [types.Content(role="user", parts=[
-            types.Part.from_text(text=prompt.context),
-            types.Part.from_text(text=prompt.state_prompt),
-            types.Part.from_bytes(data=prompt.image_jpeg, mime_type="image/jpeg"),
+            *(types.Part.from_text(text=t) for t in (prompt.context, prompt.state_prompt) if t),
+            *([types.Part.from_bytes(data=prompt.image_jpeg, mime_type="image/jpeg")] if prompt.image_jpeg else []),
             types.Part.from_text(text=prompt.step_text),
-        ])]
+        ])]  # the planning call has no image and no state prompt
 
     def _classify(self, exc: BaseException) -> tuple[bool, float | None]:
         if isinstance(exc, genai_errors.APIError):

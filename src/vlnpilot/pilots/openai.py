@@ -89,12 +89,12 @@ class OpenAIPilot(ModelPilot):
         image_url = "data:image/jpeg;base64," + base64.b64encode(prompt.image_jpeg).decode("ascii")
         return [
             {"role": "system", "content": prompt.system},
-            {"role": "user", "content": [
+            {"role": "user", "content": [part for part in (
                 {"type": "text", "text": prompt.context},
                 {"type": "text", "text": prompt.state_prompt},
                 {"type": "image_url", "image_url": {"url": image_url, "detail": self.detail}},
                 {"type": "text", "text": prompt.step_text},
-            ]},
+            ) if part.get("text", prompt.image_jpeg)]},  # the planning call has no image and no state prompt
         ]
 
     def _kwargs(self, prompt: Any, fmt: str) -> dict[str, Any]:

@@ -211,9 +211,9 @@ class OraclePilot:
 
     def _mission_waypoint(self, pilot_input: PilotInput, state: State) -> None:
         """In a mission, Recognize Room first flies to the room's spawn point when a stage starts away from its
-        goal, and when an object's room is entered: a stage starts wherever the last one ended (in front of an
-        object, beside a door leaf), and the oracle's straight lines are proven from the spawn points. One-stage
-        episodes fly exactly as before."""
+        goal (it starts wherever the last one ended: in front of an object, beside a door leaf; the oracle's
+        straight lines are proven from the spawn points), and 0.8 m straight on when an object's room is entered
+        (a turn at once may graze the door leaf just passed). One-stage episodes fly exactly as before."""
         task = self._task
         if pilot_input.stage != self._stage:
             self._stage, self._centred = pilot_input.stage, set()
@@ -222,8 +222,14 @@ class OraclePilot:
                 self._waypoint = self._room_spawn()
         entering = task.goal_target is not None and self._room == task.goal_room and pilot_input.step > 1
         if state is State.RECOGNIZE_ROOM and entering and self._room not in self._centred:
-            self._centred.add(self._room)
-            self._waypoint = self._room_spawn()
+            self._centred.add(self._room)  # straight on, away from the door leaf just passed
+            self._waypoint = self._ahead(self._gt.pose(), 0.8)
+
+    def _ahead(self, pose: Pose, metres: float) -> tuple[float, float] | None:
+        """The point `metres` straight ahead, if it is still in this room."""
+        c, sn = pose.heading()
+        x, y = pose.x + metres * c, pose.y + metres * sn
+        return (x, y) if self._gt.scene.room_at(x, y) == self._room else None
 
     def _room_spawn(self) -> tuple[float, float] | None:
         """The room's spawn point: free space from which every route of the room is flown (a stage that ended
