@@ -180,3 +180,15 @@ def test_isr_csr_and_cgt_after_lhpr_vln():
     assert StageRate("csr").over(results) == pytest.approx(3 / 6)  # of all 6 stages
     # path-weighted: 1 + 3 + 2 of 1 + 3 + 2 + 1 + 1 + (the old one's shortest path, 0 here)
     assert StageRate("cgt").over(results) == pytest.approx(6 / 8)
+
+
+def test_the_episode_report_marks_the_stage_boundaries(sim, tmp_path):
+    from vlnpilot.episode_run import run_recorded_episode
+    from vlnpilot.report.html import write_episode_report
+
+    mission = plan_mission("Go to the bedroom and then find the sink in the bathroom", sim.scene, "living_room")
+    result = run_recorded_episode(sim, OraclePilot(), mission, EpisodeConfig(), run_dir=tmp_path / "run",
+                                  spawn="living_room", pilot_spec="oracle")
+    page = write_episode_report(tmp_path / "run").read_text()
+    assert result.success and page.count('<tr class="stage-start">') == 2
+    assert "<strong>Stage 2</strong>: find sink in bathroom" in page

@@ -118,3 +118,33 @@ def test_vln_pilot_plan_prints_the_plan_and_flies_nothing(monkeypatch, capsys):
     assert code == 0 and "1. go to bedroom" in out and "2. find sink in bathroom" in out
     code, _, err = run_main(monkeypatch, capsys, "plan", "Go to the bedroom or the bathroom")
     assert code == 2 and "names 2 rooms" in err
+
+
+def test_a_person_plans_through_stdin_with_one_json_line():
+    import io
+
+    from vlnpilot.scene import load_scene
+
+    sink = {"kind": "object", "room": "bathroom", "target": "sink"}
+    lines = [json.dumps({"stages": [sink], "avoid": ["bedroom"], "refusal": None}),  # unreachable: re-asked
+             json.dumps({"stages": [sink], "avoid": [], "refusal": None})]
+    out = io.StringIO()
+    pilot = make_pilot("stdin", input=io.StringIO("\n".join(lines) + "\n"), output=out)
+    mission, planning = plan_instruction("Find the sink, quickly please", load_scene("cabin"), "living_room", pilot)
+    shown = out.getvalue()
+    assert "PLAN (before take-off)" in shown and "JSON schema of the answer" in shown and '"enum"' in shown
+    assert "answer with ONE line of JSON: stages, avoid, refusal" in shown
+    assert "cannot be reached from living_room without entering bedroom" in planning.calls[0]["error"]
+    assert "Your previous plan was rejected" in shown and mission.plan() == {"stages": [{"object": "sink"}]}
+
+
+def test_an_agent_plans_through_files_as_call_001(tmp_path):
+    from vlnpilot.scene import load_scene
+
+    pilot = make_pilot(f"files:{tmp_path / 'ep'}", clock=lambda: 0.0, sleep=lambda s: None)
+    (tmp_path / "ep" / "001.answer.json").write_text(json.dumps(VALID))
+    mission, planning = plan_instruction(QUERY, load_scene("cabin"), "living_room", pilot, planner="pilot")
+    prompt = (tmp_path / "ep" / "001.prompt.md").read_text()
+    assert prompt.startswith("# Plan before take-off") and "`001.answer.json`" in prompt and QUERY in prompt
+    assert not (tmp_path / "ep" / "001.png").exists()
+    assert mission.source == "files" and mission.plan()["stages"][1] == {"return": "living_room"}

@@ -103,7 +103,7 @@ def parse_mission(query: str, scene: Scene) -> Mission:
     """Read `query` into a Mission (not yet validated against reachability: `mission.validate_mission`)."""
     text = _END_PUNCT.sub("", _norm(query))
     if not text:
-        raise PlanError("the instruction is empty; try e.g. 'Go to the bedroom, then come back'")
+        raise PlanError("the query is empty; try e.g. 'Go to the bedroom' or 'Go to the bedroom, then come back'")
     masked, names = _mask(text, scene)
     clauses = _clauses(masked)
     if len(clauses) == 1 and not (_AVOID.match(clauses[0]) or _NOT.match(clauses[0])

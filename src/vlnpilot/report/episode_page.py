@@ -224,7 +224,8 @@ def _entry_html(ep: Episode, entry: Entry, colors: Mapping[str, str], plan_pos: 
 def _strip(ep: Episode, colors: Mapping[str, str]) -> str:
     chips = []
     for e in ep.entries:
-        flags = []
+        flags = ["stage-start"] if e.stage is not None and e.stage > 1 and e.index > 0 and \
+            ep.entries[e.index - 1].stage != e.stage else []
         if e.failures or e.decision is None and e.step is not None:
             flags.append("flag-fail")
         if e.interventions or e.oscillation_event or (e.proposed and e.executed and e.proposed != e.executed):
@@ -242,9 +243,14 @@ def _strip(ep: Episode, colors: Mapping[str, str]) -> str:
 
 def _steps_table(ep: Episode, colors: Mapping[str, str]) -> str:
     rows = []
+    stage = None
     for e in ep.entries:
         if e.step is None:
             continue
+        if e.stage is not None and e.stage != stage:  # a mission's stage boundary
+            stage = e.stage
+            goal = _stage_goal(ep, stage)
+            rows.append(f'<tr class="stage-start"><td colspan="10"><strong>Stage {stage}</strong>{goal}</td></tr>')
         d = e.decision or {}
         notes = []
         if e.failures:
@@ -279,6 +285,17 @@ def _steps_table(ep: Episode, colors: Mapping[str, str]) -> str:
             '<th>Notes</th></tr>')
     return (f'<section class="card"><h2>All steps</h2><div class="tablewrap"><table class="steps">'
             f'<thead>{head}</thead><tbody>{"".join(rows)}</tbody></table></div></section>')
+
+
+def _stage_goal(ep: Episode, stage: int) -> str:
+    """': find sink in bathroom' for stage `stage` of the run's recorded mission, or nothing."""
+    stages = (ep.summary.get("mission") or {}).get("stages") or []
+    if not 1 <= stage <= len(stages):
+        return ""
+    s = stages[stage - 1]
+    goal = f"find {s.get('target')} in {s.get('room')}" if s.get("kind") == "object" else (
+        f"return to {s.get('room')}" if s.get("kind") == "return" else f"go to {s.get('room')}")
+    return f": {esc(goal)}"
 
 
 def _plan_legend(colors: Mapping[str, str], has_collision: bool) -> str:
