@@ -12,6 +12,7 @@ import pytest
 from vlnpilot.bench.command import bench_command
 from vlnpilot.episode import EpisodeConfig, run_episode
 from vlnpilot.errors import ConfigError
+from vlnpilot.mission import Mission
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.record import load_run
 from vlnpilot.sim import SimConfig, Simulator
@@ -35,8 +36,9 @@ def replay(sim: Simulator, trial_dir: Path, **overrides):
     recorded = {"max_steps": cfg["max_steps"], "profile": cfg["profile"], "seed": cfg["seed"], "shield": cfg["shield"],
                 "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper")}
     config = EpisodeConfig(**{**recorded, **overrides})
-    return run_episode(sim, make_pilot(f"replay:{trial_dir}"), Task(**summary["task"]), config,
-                       spawn=summary["spawn"])
+    # a mission (docs/missions.md) replays the plan it flew, as recorded; a one-goal trial its task
+    task = Mission.from_dict(summary["mission"]) if "mission" in summary else Task(**summary["task"])
+    return run_episode(sim, make_pilot(f"replay:{trial_dir}"), task, config, spawn=summary["spawn"])
 
 
 def test_trials_cover_the_paper_suite() -> None:
