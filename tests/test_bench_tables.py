@@ -138,9 +138,10 @@ def test_tables_render_from_a_fixed_results_file_exactly(tmp_path: Path):
     assert tables["summary.csv"] == GOLDEN_SUMMARY_CSV
 
 
-# A suite whose names hold every character LaTeX treats specially, and Markdown's and CSV's separators.
-QUERY = 'Find the mirror_1 (50% of $5 {box} #1 ~ ^ \\ a|b, "x" & c)'
-ODD_SUITE = {"name": "r&d_50%", "repetitions": 2, "spawn_labels": {"bedroom": "Bed & Bath_1"},
+# A suite whose names hold every character LaTeX treats specially, and Markdown's and CSV's separators (the
+# comma in the label: a comma in the query would make it a two-clause mission).
+QUERY = 'Find the mirror_1 (50% of $5 {box} #1 ~ ^ \\ a|b "x" & c)'
+ODD_SUITE = {"name": "r&d_50%", "repetitions": 2, "spawn_labels": {"bedroom": "Bed, & Bath_1"},
              "rows": [{"id": "q", "spawn": "bedroom", "query": QUERY}]}
 ODD_PILOTS = ["p_1", "idle"]  # 'idle' has no records yet
 
@@ -157,9 +158,9 @@ def _tex_rows(tex: str) -> list[str]:
 def test_latex_escapes_every_special_character(odd):
     tex = odd["table.tex"]
     escaped_query = (r"Find the mirror\_1 (50\% of \$5 \{box\} \#1 \textasciitilde{} \textasciicircum{} "
-                     r'\textbackslash{} a|b, "x" \& c)')
+                     r'\textbackslash{} a|b "x" \& c)')
     row = next(line for line in _tex_rows(tex) if "mirror" in line)
-    assert row.startswith(r"Bed \& Bath\_1 & " + escaped_query + " & ")
+    assert row.startswith(r"Bed, \& Bath\_1 & " + escaped_query + " & ")
     assert r"\caption{Bench r\&d\_50\%: achievements" in tex
     assert r"\multicolumn{3}{c}{\textbf{p\_1}}" in tex and "\np\\_1 & 0/1 & " in tex
     for line in _tex_rows(tex):  # no special character is left bare; the braces left are the commands' own
@@ -189,7 +190,7 @@ def test_markdown_cells_line_up_and_escape_the_pipe(odd):
     header = table[0]
     assert header == ("| Starting Room | Query | p_1 Ach. | p_1 Coll. | p_1 Steps | idle Ach. | idle Coll. "
                       "| idle Steps |")
-    assert f"| Bed & Bath_1 | {QUERY.replace('|', chr(92) + '|')} | 0/1 | 1 | -- | 0/0 | -- | -- |" in table
+    assert f"| Bed, & Bath_1 | {QUERY.replace('|', chr(92) + '|')} | 0/1 | 1 | -- | 0/0 | -- | -- |" in table
     for line in table[:3]:  # the Table 4 part: header, rule, one row
         assert len(re.split(r"(?<!\\)\|", line)) == len(re.split(r"(?<!\\)\|", header)), line
 
@@ -199,7 +200,7 @@ def test_csv_quotes_what_it_must_and_keeps_numbers(odd):
     head, row = rows
     assert len(row) == len(head)
     cells = dict(zip(head, row, strict=True))
-    assert cells["Query"] == QUERY and cells["Starting Room"] == "Bed & Bath_1"  # read back verbatim
+    assert cells["Query"] == QUERY and cells["Starting Room"] == "Bed, & Bath_1"  # read back verbatim
     assert (cells["p_1 Ach."], cells["p_1 Coll."], cells["p_1 Steps"]) == ("0/1", "1", "0")  # numbers, not '--'
     assert (cells["Row"], cells["Spawn"], cells["Goal Room"], cells["Goal Target"]) == ("q", "bedroom", "bedroom",
                                                                                       "mirror")

@@ -11,7 +11,7 @@ from vlnpilot.scene import load_scene
 from vlnpilot.scene.geodesic import geodesic_length
 from vlnpilot.scene.validate import CELL_M, CLEARANCE_M, Grid, occupancy
 from vlnpilot.tasks.success import DEFAULT_SUCCESS
-from vlnpilot.tasks.task import _door_waypoints, parse_query, shortest_path_length
+from vlnpilot.tasks.task import parse_query, shortest_path_length, shortest_path_points
 
 
 def _wall_with_gap() -> Grid:
@@ -46,7 +46,7 @@ def test_cabin_spl_path_goes_around_furniture() -> None:
     scene = load_scene("cabin")
     start = scene.spawn("bedroom").pose
     task = parse_query("Find the refrigerator", scene)
-    through_doors = _door_waypoints(scene, start, task, DEFAULT_SUCCESS)
+    through_doors = shortest_path_points(scene, start, task, DEFAULT_SUCCESS)
     grid = occupancy(scene, CLEARANCE_M)
     assert not all(grid.segment_free(p, q) for p, q in zip(through_doors, through_doors[1:], strict=False))
     straight = sum(math.dist(p, q) for p, q in zip(through_doors, through_doors[1:], strict=False))

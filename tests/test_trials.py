@@ -16,6 +16,7 @@ from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.tasks.mission import Mission
 from vlnpilot.tasks.success import recorded_success
 from vlnpilot.tasks.task import Task
 
@@ -38,8 +39,9 @@ def replay(sim: Simulator, trial_dir: Path, **overrides):
                 "overlay": cfg.get("overlay"), "context": (cfg.get("context") or {}).get("preset", "paper"),
                 "success": recorded_success(cfg.get("success"))}  # judged by the monitor it was flown under
     config = EpisodeConfig(**{**recorded, **overrides})
-    return run_episode(sim, make_pilot(f"replay:{trial_dir}"), Task(**summary["task"]), config,
-                       spawn=summary["spawn"])
+    # a mission (docs/missions.md) replays the plan it flew, as recorded; a one-goal trial its task
+    task = Mission.from_dict(summary["mission"]) if "mission" in summary else Task(**summary["task"])
+    return run_episode(sim, make_pilot(f"replay:{trial_dir}"), task, config, spawn=summary["spawn"])
 
 
 def test_trials_cover_the_paper_suite() -> None:

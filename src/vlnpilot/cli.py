@@ -8,7 +8,7 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 from rich.console import Console
@@ -29,6 +29,8 @@ PROFILE_HELP = "FSM profile: paper, fast or ranged (fast, and A2 in Reach Object
 SensorsOpt = Annotated[str, typer.Option("--sensors", help="Range sensors the drone carries: none, tof (a RoboMaster "
                                          "TT's forward ToF) or multiranger (Crazyflie Multi-ranger deck).")]
 MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
+PlannerOpt = Annotated[str, typer.Option("--planner", help="Who plans the mission: auto (the pilot, if it plans, "
+                                        "unless the instruction is one plain goal), pilot or parser.")]
 PilotOptionOpt = Annotated[list[str] | None, typer.Option(
     "--pilot-option", metavar="KEY=VALUE", help="A pilot option, e.g. detail=high or timeout=30 (repeatable).")]
 
@@ -125,8 +127,12 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         live: Annotated[bool, typer.Option("--live", help="Serve the live ground station while it flies.")] = False,
         live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
         live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
+        planner: PlannerOpt = "auto",
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
+
+    The instruction may be a mission of several stages ("Go to the bathroom, then come back"): it is planned
+    before take-off (docs/missions.md), and one that cannot be planned is refused with exit code 2.
 
     Exit code 0 when the episode was flown to any outcome, 3 when it ended in pilot_error, 4 when the robot's
     link failed (link_lost), 2 for bad input, 130 when interrupted."""
@@ -140,7 +146,6 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
     from vlnpilot.safety import default_shield
     from vlnpilot.scene import load_scene
-    from vlnpilot.tasks.task import parse_query
 
     robot = check_robot(robot, tello_host)
     capabilities = robot_capabilities(robot, sensors, tello_host)  # refuses a sensor the drone does not carry
@@ -151,7 +156,6 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
-    task = parse_query(query, sc)
     config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
                            context=context)
     if pilot is None:
@@ -163,6 +167,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     _say_remote_url(pilot)
     pilot_obj = make_pilot(pilot, **options)
     check_capabilities(capabilities, robot, shield=shield, pilot=pilot_obj)  # before anything flies
+    task = _planned(query, sc, spawn_id, pilot_obj, planner)  # before take-off: a refusal flies nothing
     run_dir = claim_run_dir(out or default_run_dir("runs", f"{spawn_id}-{query}"), overwrite=overwrite)
 
     def show(rec: dict) -> None:
@@ -203,6 +208,53 @@ def _live_station(live: bool, run_dir: Path, pilot: object, scene: object, host:
     from vlnpilot.live.station import live_control
 
     return live_control(run_dir, pilot, scene, host=host, port=port, say=lambda line: console.print(escape(line)))
+
+
+def _planned(query: str, scene: Any, spawn_id: str, pilot: Any, planner: str) -> Any:
+    """The instruction's mission (pilots/planning.py), said in a line when it is more than one goal."""
+    from vlnpilot.pilots.planning import plan_instruction
+
+    mission, _ = plan_instruction(query, scene, scene.spawn(spawn_id).room, pilot, planner=planner,
+                                  say=lambda line: err_console.print(escape(line)))
+    if mission.recorded:
+        console.print(f"plan ({escape(mission.source)}): {escape(mission.describe().replace(chr(10), '; '))}")
+    return mission
+
+
+@app.command("plan")
+def plan(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to the bathroom, then come back".')],
+         scene: SceneOpt = "cabin",
+         spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name (where a return goes).")] = None,
+         pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC that plans (default, or a pilot "
+                                                   "that does not plan: the deterministic parser).")] = None,
+         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
+         pilot_option: PilotOptionOpt = None,
+         planner: PlannerOpt = "pilot",
+         as_json: Annotated[bool, typer.Option("--json", help="Print the mission as JSON.")] = False) -> None:
+    """Print the plan of an instruction against a scene's map, and fly nothing. Exit code 2 if it is refused."""
+    from vlnpilot.core.exits import check_base_url
+    from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.pilots.planning import can_plan, plan_instruction
+    from vlnpilot.scene import load_scene
+
+    sc = load_scene(scene)
+    spawn_id = spawn or sc.spawns[0].id
+    sc.spawn(spawn_id)
+    pilot_obj = None
+    if pilot is not None:
+        options = _pilot_options(pilot, pilot_option)
+        if base_url:
+            options["base_url"] = check_base_url(base_url)
+        pilot_obj = make_pilot(pilot, **options)
+    mission, _ = plan_instruction(query, sc, sc.spawn(spawn_id).room, pilot_obj,
+                                  planner=planner if can_plan(pilot_obj) else "parser",
+                                  say=lambda line: err_console.print(escape(line)))
+    if as_json:
+        console.print_json(json.dumps({**mission.to_dict(), "plan": mission.plan()}))
+        return
+    console.print(f"plan of {escape(repr(query))} in {escape(sc.name)} from {escape(spawn_id)} "
+                  f"(by {escape(mission.source)}):")
+    console.print(escape(mission.describe()))
 
 
 def _pilot_options(spec: str, pairs: list[str] | None) -> dict:

@@ -172,7 +172,7 @@ class KillingPilot:
     """Flies `moves` in turn (searching an object: they are all allowed); at step `kill_at` it kills the emulator,
     then asks for its move all the same."""
 
-    name, model, privileged = "killer", "killer-1", False
+    name, model = "killer", "killer-1"
 
     def __init__(self, emulator: TelloEmulator, kill_at: int, moves: tuple[str, ...] = ("B1", "A2", "B1", "A1")):
         self.emulator, self.kill_at, self.moves = emulator, kill_at, moves

@@ -47,6 +47,7 @@ class EpisodeSpec:
     spawn_jitter_m: float = 0.0
     spawn_jitter_deg: float = 0.0
     sensors: str = "none"  # the range sensors the drone carries (vlnpilot.core.ranging.SENSORS)
+    mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict); None: the goal above
 
 
 @dataclass(frozen=True)
@@ -144,6 +145,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.prompting.render import prompt_hash
+    from vlnpilot.tasks.mission import Mission
     from vlnpilot.tasks.task import Task
 
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors)
@@ -152,7 +154,8 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
         shutil.rmtree(run_dir)
     config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
-    task = Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target)
+    task = (Mission.from_dict(spec.mission) if spec.mission is not None
+            else Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target))
     result = run_recorded_episode(sim, pilot, task, config, run_dir=run_dir, spawn=spec.spawn,
                                   pilot_spec=spec.pilot, save_frames=spec.save_frames and spec.render)
     return {

@@ -212,7 +212,7 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                     query=row.query, goal_room=row.goal_room, goal_target=row.goal_target, max_steps=suite.max_steps,
                     profile=suite.profile, run_dir=str((out / rel).resolve()), run_dir_rel=rel.as_posix(),
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
-                    render=settings.render, save_frames=settings.save_frames,
+                    render=settings.render, save_frames=settings.save_frames, mission=row.mission,
                     spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg,
                     sensors=row.sensors or settings.sensors))
     return specs
@@ -331,6 +331,9 @@ def _fly(settings: BenchSettings, flight: _Flight, todo: Sequence[EpisodeSpec], 
         flight.say(f"bench [bold]{suite.name}[/bold]: {flight.planned} episodes ({len(suite.rows)} rows x "
                    f"{suite.repetitions} reps x {len(flight.pilots)} pilot(s)), {flight.done} already done; "
                    f"{executor.describe}; out {flight.out}")
+        if suite.refused:  # a mission suite's instructions that must not fly (docs/missions.md)
+            flight.say(f"{len(suite.refused)} instruction(s) refused before take-off, as the suite expects: "
+                       + "; ".join(f"{r.id} ({r.refusal.split(';')[0]})" for r in suite.refused))
         if settings.workers is None and settings.executor == "local" and not all(p.privileged for p in flight.pilots):
             flight.say("hint: model pilots spend most of a step waiting for the model; --workers 16 keeps more "
                        "episodes in flight than there are cores")

@@ -14,6 +14,16 @@
 `goal` is optional: the query is always parsed with `tasks.parse_query`, and a goal given in the row must agree
 with it (so a parser change can never silently change what a suite measures). `goal: bathroom` is short for
 `goal: {room: bathroom}`. The built-in `paper` suite is the paper's Table 4.
+
+A mission suite (`missions`, `missions-houses`; docs/missions.md) reads each query with the mission parser
+(`tasks.mission_parser.plan_mission`) against the row's spawn, and a row may record the expected plan, which must agree:
+
+      - {id: bath-back, spawn: living_room, query: "Go to the bathroom, then come back",
+         plan: {stages: [{room: bathroom}, {return: living_room}]}}
+      - {id: piano, spawn: living_room, query: Find the piano, refuse: no known object}
+
+A row with `refuse` must be refused before take-off with a message containing it; it is never flown
+(`Suite.refused`).
 """
 
 from __future__ import annotations
@@ -32,12 +42,15 @@ from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.fsm import PROFILES
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
+from vlnpilot.tasks.mission import Mission, PlanError, as_mission
+from vlnpilot.tasks.mission_parser import plan_mission
 from vlnpilot.tasks.task import Task, parse_query
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
              "spawn_labels", "rows")
-_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors")  # a row's own scene overrides the suite's
-# (house suites); a row's `sensors` (none, tof, multiranger: vlnpilot.core.ranging) the bench's --sensors
+# a row's own scene overrides the suite's (house suites); a row's `sensors` (none, tof, multiranger:
+# vlnpilot.core.ranging) the bench's --sensors; plan / refuse: what a mission suite expects
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "plan", "refuse")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -60,16 +73,32 @@ class SuiteRow:
     goal_target: str | None = None
     scene: str | None = None  # this row's scene when it differs from the suite's (e.g. 'house:7')
     sensors: str | None = None  # the range sensors this row's drone carries, when it names them (else --sensors)
+    mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict), resolved at the spawn
 
     @property
-    def task(self) -> Task:
+    def task(self) -> Task | Mission:
+        if self.mission is not None:
+            return Mission.from_dict(self.mission)
         return Task(query=self.query, goal_room=self.goal_room, goal_target=self.goal_target)
 
     def canonical(self) -> dict[str, Any]:
         out = {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
                "goal_target": self.goal_target}
         out = {**out, "scene": self.scene} if self.scene else out
-        return {**out, "sensors": self.sensors} if self.sensors else out
+        if self.sensors:
+            out = {**out, "sensors": self.sensors}
+        return {**out, "plan": Mission.from_dict(self.mission).plan()} if self.mission else out
+
+
+@dataclass(frozen=True)
+class RefusedRow:
+    """A suite row that must be refused before take-off, and the refusal it got."""
+
+    id: str
+    spawn: str
+    query: str
+    refusal: str
+    scene: str | None = None
 
 
 @dataclass(frozen=True)
@@ -86,6 +115,7 @@ class Suite:
     spawn_labels: dict[str, str] = field(default_factory=dict)
     description: str = ""
     source: str = ""  # 'builtin:paper' or the file path, for the manifest
+    refused: tuple[RefusedRow, ...] = ()  # rows refused before take-off, as the suite expects (never flown)
 
     def row(self, row_id: str) -> SuiteRow:
         for r in self.rows:
@@ -214,6 +244,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
             errors.append(f"spawn_labels: unknown spawn {spawn!r}; valid spawns: {', '.join(valid_spawns)}")
     raw_rows = data.get("rows")
     rows: list[SuiteRow] = []
+    refused: list[RefusedRow] = []
     if not isinstance(raw_rows, list) or not raw_rows:
         errors.append("'rows' must be a non-empty list of {spawn, query, goal} rows")
         raw_rows = []
@@ -221,6 +252,9 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     for i, raw in enumerate(raw_rows, 1):
         row = _row(i, raw, scene, errors)
         if row is None:
+            continue
+        if isinstance(row, RefusedRow):
+            refused.append(row)
             continue
         if row.id in seen:
             errors.append(f"row {i} ({row.id}): the id is also used by row {seen[row.id]}; row ids must be unique")
@@ -232,10 +266,10 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     return Suite(name=str(data.get("name") or default_name), rows=tuple(rows), scene=scene.name, repetitions=reps,
                  max_steps=max_steps, seed=seed, profile=profile, spawn_jitter_m=jm, spawn_jitter_deg=jd,
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
-                 description=str(data.get("description") or ""), source=source)
+                 description=str(data.get("description") or ""), source=source, refused=tuple(refused))
 
 
-def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
+def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | RefusedRow | None:
     if not isinstance(raw, dict):
         errors.append(f"row {i}: expected a mapping with spawn, query and goal, got {raw!r}")
         return None
@@ -258,11 +292,12 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
     if not isinstance(query, str) or not query.strip():
         errors.append(f"{where}: 'query' must be a non-empty string, got {query!r}")
         return None
-    try:
-        task = parse_query(query, scene)
-    except VLNPilotError as exc:
-        errors.append(f"{where}: {exc}")
+    if spawn not in valid_spawns:
         return None
+    mission = _planned(raw, where, scene, row_scene is not None, errors)
+    if not isinstance(mission, Mission):
+        return mission
+    task = mission.task(len(mission.stages) - 1)
     goal = raw.get("goal")
     if goal is not None:
         if isinstance(goal, str):
@@ -283,12 +318,7 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
                 parsed = task.goal_room + (f" / {task.goal_target}" if task.goal_target else "")
                 errors.append(f"{where}: the goal says {room}" + (f" / {target}" if target else "")
                               + f" but the query {query!r} parses to {parsed}")
-    sensors = raw.get("sensors")
-    if sensors is not None:
-        from vlnpilot.core.ranging import SENSORS
-
-        if str(sensors) not in SENSORS:
-            errors.append(f"{where}: unknown sensors {sensors!r}; valid: {', '.join(SENSORS)}")
+    sensors = _row_sensors(raw, where, errors)
     row_id = raw.get("id")
     if row_id is None:
         row_id = _slug(f"{spawn}-{query}")
@@ -298,7 +328,46 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | None:
         return None
     return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target,
                     scene=scene.name if row_scene is not None else None,
+                    mission=None if mission.is_single else mission.to_dict(),
                     sensors=str(sensors) if sensors is not None else None)
+
+
+def _row_sensors(raw: dict[str, Any], where: str, errors: list[str]) -> Any:
+    """The row's own range sensors (none, tof, multiranger: vlnpilot.core.ranging), if it names them."""
+    from vlnpilot.core.ranging import SENSORS
+
+    sensors = raw.get("sensors")
+    if sensors is not None and str(sensors) not in SENSORS:
+        errors.append(f"{where}: unknown sensors {sensors!r}; valid: {', '.join(SENSORS)}")
+    return sensors
+
+
+def _planned(raw: dict[str, Any], where: str, scene: Scene, own_scene: bool,
+             errors: list[str]) -> Mission | RefusedRow | None:
+    """The row's mission as the parser plans it at its spawn, checked against its `plan` or `refuse`."""
+    spawn, query = raw["spawn"], raw["query"]
+    if raw.get("goal") is not None and raw.get("plan") is None and raw.get("refuse") is None:
+        try:  # a one-goal row (the paper's, the trials'): its query is read as before missions, the goal checks it
+            return as_mission(parse_query(query, scene))
+        except VLNPilotError as exc:
+            errors.append(f"{where}: {exc}")
+            return None
+    try:
+        mission = plan_mission(query, scene, scene.spawn(spawn).room)
+    except VLNPilotError as exc:
+        if isinstance(raw.get("refuse"), str) and isinstance(exc, PlanError) and raw["refuse"] in str(exc):
+            return RefusedRow(id=str(raw.get("id") or _slug(f"{spawn}-{query}")), spawn=spawn, query=query,
+                              refusal=str(exc), scene=scene.name if own_scene else None)
+        errors.append(f"{where}: {exc}")
+        return None
+    if raw.get("refuse") is not None:
+        errors.append(f"{where}: the suite expects a refusal ({raw['refuse']!r}) but {query!r} plans to "
+                      f"{mission.plan()}")
+        return None
+    if raw.get("plan") is not None and raw["plan"] != mission.plan():
+        errors.append(f"{where}: the plan says {raw['plan']} but the query {query!r} plans to {mission.plan()}")
+        return None
+    return mission
 
 
 def _slug(text: str) -> str:

@@ -130,9 +130,12 @@ _OWN_COLUMNS = (
 )
 
 
-def summary_columns() -> list[Column]:
-    """The columns of the summary per pilot, the bench's own and the measures', in rank order."""
-    return sorted((*_OWN_COLUMNS, *episode_measures.columns()), key=lambda c: c.rank)
+def summary_columns(summaries: Sequence[Any] | None = None) -> list[Column]:
+    """The columns of the summary per pilot, the bench's own and the measures', in rank order; a column with a
+    `when` only if it holds for one of `summaries` (the mission columns only in a bench with missions)."""
+    cols = [c for c in (*_OWN_COLUMNS, *episode_measures.columns())
+            if c.when is None or (summaries is not None and any(c.when(s) for s in summaries))]
+    return sorted(cols, key=lambda c: c.rank)
 
 
 def render_markdown(data: _Data, config_hash: str | None = None) -> str:
@@ -145,7 +148,7 @@ def render_markdown(data: _Data, config_hash: str | None = None) -> str:
                 c = data.cell(p, row)
                 cells += [_ach(c), _dash(c.collisions), _dash(c.steps_exceeded)]
             lines.append(_md_row(cells))
-    cols = [c for c in summary_columns() if c.md is not None]
+    cols = [c for c in summary_columns(data.summaries()) if c.md is not None]
     lines += ["", LEGEND, "", "## Summary per pilot", "", _md_row([str(c.md) for c in cols]),
               _md_row(["---"] * 2 + ["---:"] * (len(cols) - 2))]
     lines += [_md_row([c.text(s) for c in cols]) for s in data.summaries()]
@@ -180,7 +183,7 @@ def render_csv(data: _Data) -> str:
 def render_summary_csv(data: _Data) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    cols = summary_columns()
+    cols = summary_columns(data.summaries())
     w.writerow([h for c in cols for h in c.csv] + ["shield", "prompt_hash", "git_sha"])
     for s in data.summaries():
         pv = data.provenance(s.pilot)
@@ -231,7 +234,7 @@ def render_tex(data: _Data, config_hash: str | None = None) -> str:
             lines.append(" & ".join(cells) + r" \\")
     lines += [r"\bottomrule", r"\end{tabular}", "", r"\smallskip", r"\footnotesize " + e(LEGEND) + r"\\",
               r"Provenance: " + "; ".join(e(x) for x in data.notes(config_hash)) + ".", r"\end{table}", ""]
-    cols = [c for c in summary_columns() if c.tex is not None]
+    cols = [c for c in summary_columns(data.summaries()) if c.tex is not None]
     lines += [r"\begin{table}[ht]", r"\centering",
               r"\caption{Bench " + e(data.suite.name) + r": summary per pilot. Success rate with its 95\% Wilson "
               r"interval, SPL, mean steps, collisions, step limits reached, false successes, invalid decisions, "

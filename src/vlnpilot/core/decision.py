@@ -117,6 +117,10 @@ class PilotInput:
     # The conversation so far, when the caller holds it (the pilot server's client): None lets a model pilot use
     # its own `history` option; a tuple (even empty) is the whole conversation, and the pilot remembers nothing.
     history: tuple[EarlierTurn, ...] | None = None
+    # A mission of several stages (vlnpilot.tasks.mission: Mission.to_dict()) and the current stage (0-based); None for
+    # a one-stage mission, whose prompt is the paper's.
+    mission: Mapping[str, Any] | None = None
+    stage: int = 0
 
 
 class DecisionError(VLNPilotError):

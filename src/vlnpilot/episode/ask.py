@@ -33,6 +33,7 @@ from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Pilot, PilotError, as_base_pilot
 from vlnpilot.prompting.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.safety import draw_corridor
+from vlnpilot.tasks.mission import Mission, as_mission
 from vlnpilot.tasks.task import Task
 
 if TYPE_CHECKING:
@@ -129,17 +130,31 @@ def needs_confirmation(context: ContextConfig, decision: Decision | None, asked:
 class PilotAsker:
     """Asks the episode's pilot (or a person taking a step over) and remembers what the next prompt needs."""
 
-    def __init__(self, pilot: Pilot, task: Task, config: EpisodeConfig, topological_map: Any,
-                 sensing: RangeSensing | None = None, sensor: RangeSensor | None = None):
+    def __init__(self, pilot: Pilot, task: Task | Mission, config: EpisodeConfig, topological_map: Any,
+                 sensing: RangeSensing | None = None, sensor: RangeSensor | None = None,
+                 max_steps: int | None = None):
         self.pilot, self.task, self.config, self.topo = pilot, task, config, topological_map
+        self._mission = as_mission(task)
+        self.mission = None if self._mission.is_single else self._mission.to_dict()  # one stage: the paper's prompt
         bounded = traits_of(pilot).uses_step_deadline  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
         self.sensing = sensing  # the drone's range sensors, read once per step
         longer = "A2" in state_spec(State.REACH_OBJECT, config.profile).moves
-        self.context = PilotContext(config.context, config.max_steps, sensor, task.goal_target, longer)
+        self.context = PilotContext(config.context, max_steps or config.max_steps, sensor, None, longer)
+        self.stage = 0  # the mission's current stage (the episode moves it on)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
         self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)
+
+    @property
+    def stage(self) -> int:
+        return self._stage
+
+    @stage.setter
+    def stage(self, index: int) -> None:
+        """The mission moves on: the range stop rule names the new stage's object (None for a room stage)."""
+        self._stage = index
+        self.context.goal_target = self._mission.task(index).goal_target
 
     def ask(self, step: int, state: State, obs: Observation, person: Pilot | None = None) -> StepAnswer:
         """Ask until a valid decision, a fatal or transient failure, or `max_reasks` rejected answers."""
@@ -156,7 +171,8 @@ class PilotAsker:
         while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=self.task.query, topological_map=self.topo, state=state,
                              previous_movement=self.previous, step=step, profile=config.profile,
-                             feedback=tuple(feedback), context=context_lines, in_state=in_state)
+                             feedback=tuple(feedback), context=context_lines, in_state=in_state,
+                             mission=self.mission, stage=self.stage)
             answer = ask(flier, pin, state, config.profile, step_end - time.monotonic())
             attempt += 1
             out.usages.append(answer.usage)

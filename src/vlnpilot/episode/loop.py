@@ -36,7 +36,8 @@ from vlnpilot.episode.record import EpisodeRecording, StepCallback, StepRecord
 from vlnpilot.pilots.base import BasePilot, Pilot, as_base_pilot
 from vlnpilot.safety import SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
-from vlnpilot.tasks.task import Task, judge
+from vlnpilot.tasks.mission import Mission, MissionProgress, as_mission, mission_budget
+from vlnpilot.tasks.task import Task
 
 __all__ = ["run_episode"]
 
@@ -75,20 +76,25 @@ class _End:
     judged_by: str | None = None  # None: by ground truth if there is any, else nobody
 
 
-def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig | None = None, *,
+def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: EpisodeConfig | None = None, *,
                 spawn: str | Spawn | None = None, recorder: Recorder | None = None,
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
                 judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
-    """Fly one episode of `task` from `spawn` with `pilot`; record it if a recorder is given. Without ground
-    truth (a real robot) a final state is a success as declared, unless `judge_outcome` (the operator) rules."""
+    """Fly one episode of `task` (a Task, or a Mission of stages) from `spawn` with `pilot`; record it if a
+    recorder is given. Without ground truth (a real robot) a final state is a success as declared, unless
+    `judge_outcome` (the operator) rules. A stage judged a success hands over to the next one from Recognize
+    Room; a stage judged a failure ends the mission. The budget is `config.max_steps` per stage, shared."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
     pilot = as_base_pilot(pilot)  # its traits and hooks, declared (a bare-protocol pilot is adapted once, here)
     safety = _preflight(env, pilot, config)  # on the ground: a real drone takes off in reset
     obs: Observation = env.reset(spawn, seed=config.seed)
     gt = _attach_ground_truth(env, pilot)
-    measures, recording, asker = _start(env, pilot, task, config, obs, safety, recorder, on_step, spawn, pilot_spec)
+    progress = MissionProgress(_resolved(as_mission(task), env, obs, gt))
+    max_steps = mission_budget(config.max_steps, progress.mission)
+    measures, recording, asker = _start(env, pilot, progress.mission, config, obs, safety, recorder, on_step, spawn,
+                                        pilot_spec, max_steps)
     state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
-    for step in range(1, config.max_steps + 1):
+    for step in range(1, max_steps + 1):
         gate = control.before_step(step)
         if gate.abort is not None:
             end = _End("aborted", gate.abort)
@@ -102,17 +108,24 @@ def run_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfi
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
         pose_before, (obs, flown, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
         measures.update(StepFacts(tuple(answer.usages), answer.valid, flown, pose_before, obs.pose))
-        recording.step(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures, config.profile))
+        progress.saw(gt.room() if gt is not None else None)
+        recording.step(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures, config.profile,
+                              None if progress.mission.is_single else progress.stage + 1))
         asker.flown(step, state, answer, flown or HOVER, verdict.next_state if flown else state, verdict.feedback)
         end = _stopped(halt, obs, answer, asker.failed_streak, config.max_failed_steps)
-        if end is None and flown is not None:  # the FSM moves on; a final state ends the episode, judged
+        if end is None and flown is not None:  # the FSM moves on; a final state ends the stage, judged
             state = verdict.next_state
-            end = _judged(task, state, gt, config, judge_outcome) if state in FINAL_STATES else None
+            end = _judged(progress, state, gt, config, judge_outcome) if state in FINAL_STATES else None
+            if end is not None and end.outcome == "success" and not progress.last:  # on to the next stage
+                progress.advance(step)
+                asker.stage, state, end = progress.stage, State.RECOGNIZE_ROOM, None
         if end is not None:
             break
     asker.close()
-    end = end or _End("max_steps", f"no final state within {config.max_steps} steps")
-    result = _result(end, steps, state, gt, measures.values(EpisodeEnd(end.outcome, safety)), t_start)
+    end = end or _End("max_steps", progress.prefix(False, f"no final state within {max_steps} steps"))
+    stages_reached = len(progress.boundaries) + (end.outcome == "success")
+    measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries)))
+    result = _result(end, steps, state, gt, measured, t_start)
     recording.finish(result, obs.pose, safety)
     _tell_pilot_the_outcome(pilot, result)
     return result
@@ -129,9 +142,15 @@ def _preflight(env: Environment, pilot: BasePilot, config: EpisodeConfig) -> Saf
     return safety
 
 
-def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, obs: Observation,
+def _resolved(mission: Mission, env: Environment, obs: Observation, gt: GroundTruth | None) -> Mission:
+    """A return stage points at the room the drone takes off in."""
+    start_room = gt.room() if gt is not None else env.scene.room_at(obs.pose.x, obs.pose.y)
+    return mission.resolved(start_room)
+
+
+def _start(env: Environment, pilot: BasePilot, task: Mission, config: EpisodeConfig, obs: Observation,
            safety: SafetyLayer, recorder: Recorder | None, on_step: StepCallback | None, spawn: str | Spawn | None,
-           pilot_spec: str | None) -> tuple[Measures, EpisodeRecording, PilotAsker]:
+           pilot_spec: str | None, max_steps: int) -> tuple[Measures, EpisodeRecording, PilotAsker]:
     """Before the first step: seed the pilot, reset the safety layer and the measures, write the run's header."""
     _reseed(pilot, config.seed)
     safety.reset(obs)
@@ -141,7 +160,7 @@ def _start(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, ob
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
     sensor = range_sensor(capabilities_of(env).range_sensor)
     return measures, recording, PilotAsker(pilot, task, config, env.scene.topological_map(), range_sensing_of(env),
-                                           sensor)
+                                           sensor, max_steps)
 
 
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
@@ -187,17 +206,18 @@ def _execute(env: Environment, safety: SafetyLayer, command: Command,
 
 def _flown(step: int, state: State, answer: StepAnswer, verdict: SafetyVerdict, flown: Command | None,
            pose_before: Pose, obs: Observation, gt: GroundTruth | None, measures: Measures,
-           profile: str) -> StepRecord:
+           profile: str, stage: int | None = None) -> StepRecord:
     """The record of a step that went to the drone; `override` says why a command outside the state's moves ran.
-    Without `flown` nothing was executed: the step keeps its decision and verdict, no command, no next state."""
+    Without `flown` nothing was executed: the step keeps its decision and verdict, no command, no next state.
+    `stage`: the mission's stage (1-based) the step flew, for a mission of several stages."""
     if flown is None:
         return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs,
                           room_true=gt.room() if gt is not None else None, verdict=verdict,
-                          confirmation=answer.confirmation)
+                          confirmation=answer.confirmation, stage=stage)
     override = override_reason(state, profile, flown, not answer.valid, verdict.interventions, verdict.next_state)
     return StepRecord(step, state, answer.decision, answer.failures, pose_before, obs, flown,
                       verdict.next_state, gt.room() if gt is not None else None, measures.reversed(), verdict,
-                      override, answer.confirmation, ranges=answer.ranges)
+                      override, answer.confirmation, ranges=answer.ranges, stage=stage)
 
 
 def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, failed_streak: int,
@@ -212,16 +232,17 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
     return None
 
 
-def _judged(task: Task, state: State, gt: GroundTruth | None, config: EpisodeConfig,
+def _judged(progress: MissionProgress, state: State, gt: GroundTruth | None, config: EpisodeConfig,
             judge_outcome: JudgeOutcome | None) -> _End:
-    """A declared final state: judged by ground truth, by the operator, or taken as declared."""
+    """A declared final state: the current stage judged by ground truth, by the operator, or taken as declared."""
     if gt is None and judge_outcome is not None:
-        ok, reason = judge_outcome(task, state)
-        return _End("success" if ok else "false_success", reason, judged_by="operator")
+        ok, reason = judge_outcome(progress.task, state)
+        return _End("success" if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
     if gt is None:
-        return _End("success", "final state declared (no ground truth to judge it)", judged_by="declared")
-    ok, why = judge(task, state, gt, config.success)
-    return _End("success" if ok else "false_success", why)
+        return _End("success", progress.prefix(True, "final state declared (no ground truth to judge it)"),
+                    judged_by="declared")
+    ok, why = progress.judge(state, gt, config.success)
+    return _End("success" if ok else "false_success", progress.prefix(ok, why))
 
 
 def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measured: dict[str, Any],

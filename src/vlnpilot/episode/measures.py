@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable, Sequence
-from dataclasses import asdict, dataclass, field, make_dataclass
+from dataclasses import asdict, dataclass, field, make_dataclass, replace
 from typing import Any, ClassVar, Protocol
 
 from vlnpilot.core.commands import Command
@@ -29,7 +29,8 @@ from vlnpilot.core.decision import Usage
 from vlnpilot.core.records import Pose
 from vlnpilot.safety import SafetyLayer
 from vlnpilot.scene.model import Scene
-from vlnpilot.tasks.task import Oscillations, PathLength, SuccessConfig, Task, shortest_path_length, spl
+from vlnpilot.tasks.mission import Mission, as_mission, stage_shortest_paths
+from vlnpilot.tasks.task import Oscillations, PathLength, SuccessConfig, Task, spl
 
 Result = dict[str, Any]  # one episode's result as recorded (`EpisodeResult.to_dict()`, a line of results.jsonl)
 
@@ -117,6 +118,7 @@ class Column:
     text: Callable[[Any], str]
     csv_cells: Callable[[Any], Sequence[Any]]
     tex_text: Callable[[Any], str] | None = None
+    when: Callable[[Any], bool] | None = None  # shown only if true of some pilot's summary (None: always)
 
     def tex_cell(self, summary: Any) -> str:
         return (self.tex_text or self.text)(summary)
@@ -134,7 +136,7 @@ def column(name: str, *, md: str | None, tex: str | None, fmt: str = "", csv_fmt
 class EpisodeStart:
     scene: Scene
     pose: Pose
-    task: Task
+    task: Task | Mission
     success: SuccessConfig
 
 
@@ -153,6 +155,8 @@ class StepFacts:
 class EpisodeEnd:
     outcome: str
     safety: SafetyLayer
+    stages_reached: int | None = None  # stages judged a success in a row (None: counted from the outcome)
+    stage_boundaries: tuple[int, ...] = ()  # the step at which each stage before the last was judged a success
 
 
 class Measure(Protocol):
@@ -175,7 +179,8 @@ class PathAndSpl:
     def reset(self, start: EpisodeStart) -> None:
         self.path = PathLength()
         self.path.reset()
-        self.shortest = shortest_path_length(start.scene, start.pose, start.task, start.success)
+        # over the whole mission path: each stage from where the one before ends (one stage: as ever)
+        self.shortest = sum(stage_shortest_paths(start.scene, start.pose, as_mission(start.task), start.success))
 
     def update(self, step: StepFacts) -> None:
         if step.command is not None:
@@ -292,6 +297,81 @@ class SafetyCounts(_ReadAtTheEnd):
         return {"interventions": len(s.interventions), "oscillation_events": len(s.events), "shield": s.name}
 
 
+def _stages(r: Result) -> tuple[int, int, bool, list[float]]:
+    """(stages, stages reached, whether a stage failed, the stages' shortest paths) of a result; a result
+    recorded before missions is one stage, reached if it succeeded."""
+    n = int(r.get("stages") or 1)
+    reached = r.get("stages_reached")
+    reached = int(r["outcome"] == "success") if reached is None else int(reached)
+    paths = list(r.get("stage_paths_m") or [float(r.get("shortest_path_m") or 0.0)] * n)
+    return n, reached, r["outcome"] != "success", paths
+
+
+@dataclass(frozen=True)
+class StageRate:
+    """A bench's stage rate after LHPR-VLN (CVPR 2025), over a pilot's episodes:
+
+    - `isr`: stages judged a success / stages flown (each stage on its own; a mission ends at its first failed
+      stage, so the stages after it are not flown and not counted);
+    - `csr`: stages reached in a row / all stages of the missions (a stage counts only if every earlier one
+      succeeded);
+    - `cgt`: `csr` weighted by each stage's shortest path (a long stage weighs more).
+    """
+
+    name: str
+
+    @property
+    def type(self) -> type:
+        return float
+
+    def over(self, results: Sequence[Result]) -> float:
+        num = den = 0.0
+        for r in results:
+            n, reached, failed, paths = _stages(r)
+            if self.name == "isr":
+                num, den = num + reached, den + reached + (failed and reached < n)
+            elif self.name == "csr":
+                num, den = num + reached, den + n
+            else:
+                num, den = num + sum(paths[:reached]), den + sum(paths)
+        return num / den if den else 0.0
+
+
+def _when_missions(s: Any) -> bool:
+    return s.stages > s.episodes  # a bench with a mission of several stages
+
+
+class MissionStages:
+    """A mission's stages: how many, how many were reached (judged a success in a row), the first that failed
+    (1-based; None after a success), the step each later stage began at, and each stage's shortest path.
+    A one-stage mission is today's episode: 1 stage, reached iff it succeeded."""
+
+    fields = (ResultField("stages", int, 1), ResultField("stages_reached", int | None, None),
+              ResultField("failed_stage", int | None, None), ResultField("stage_starts", list | None, None),
+              ResultField("stage_paths_m", list | None, None))
+    aggregates = (Total("stages", absent=1), StageRate("isr"), StageRate("csr"), StageRate("cgt"))
+    columns = tuple(replace(column(name, md=name.upper(), tex=name.upper(), fmt=".3f", csv_fmt=".4f",
+                                   rank=rank), when=_when_missions)
+                    for name, rank in (("isr", 42), ("csr", 44), ("cgt", 46)))
+
+    def reset(self, start: EpisodeStart) -> None:
+        self.mission = as_mission(start.task)
+        self.paths = stage_shortest_paths(start.scene, start.pose, self.mission, start.success)
+
+    def update(self, step: StepFacts) -> None:
+        pass
+
+    def value(self, end: EpisodeEnd) -> dict[str, Any]:
+        n = len(self.mission.stages)
+        reached = end.stages_reached if end.stages_reached is not None else int(end.outcome == "success")
+        if n == 1:  # today's episode: the fields say no more than the outcome
+            return {"stages": 1, "stages_reached": reached, "failed_stage": None if reached else 1,
+                    "stage_starts": None, "stage_paths_m": None}
+        return {"stages": n, "stages_reached": reached, "failed_stage": None if reached == n else reached + 1,
+                "stage_starts": [1, *(b + 1 for b in end.stage_boundaries)],
+                "stage_paths_m": [round(p, 4) for p in self.paths]}
+
+
 class FilledByTheEpisode:
     """`EpisodeResult` fields the episode decides itself and passes to it; in `MEASURES` only to lay them out."""
 
@@ -313,6 +393,7 @@ MEASURES: tuple[type[Measure] | FilledByTheEpisode, ...] = (
     SafetyCounts,
     # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
     FilledByTheEpisode(ResultField("judged_by", str, "ground_truth")),
+    MissionStages,
 )
 
 

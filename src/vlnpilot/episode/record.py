@@ -23,6 +23,7 @@ from vlnpilot.pilots.keyboard import HUMAN
 from vlnpilot.prompting.context import context_name
 from vlnpilot.prompting.render import prompt_hash
 from vlnpilot.safety import SafetyLayer, SafetyVerdict
+from vlnpilot.tasks.mission import Mission, mission_budget
 from vlnpilot.tasks.task import Task
 
 if TYPE_CHECKING:
@@ -50,6 +51,7 @@ class StepRecord:
     override: str | None = None  # why an executed command outside the state's allowed moves ran
     confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
     ranges: tuple[Any, ...] = ()  # the range readings the pilot was told (ranging.RangeReading), before the move
+    stage: int | None = None  # the mission's stage (1-based) this step flew, for a mission of several stages
 
     def to_dict(self) -> dict[str, Any]:
         record = {key: value(self) for key, value in ALWAYS_WRITTEN.items()}
@@ -93,6 +95,7 @@ WRITTEN_WHEN_SET: dict[str, Callable[[StepRecord], Any]] = {
     "human": lambda r: True if r.decision is not None and r.decision.model == HUMAN else None,  # the live station
     "robot": lambda r: r.obs.info or None,  # a real robot's facts: frame age, battery, safety events
     "ranges": lambda r: {x.direction: x.as_dict() for x in r.ranges} or None,  # --sensors: metres, None beyond
+    "stage": lambda r: r.stage,  # a mission of several stages: the stage flown (the report marks boundaries)
 }
 FRAMES = "frames"  # added by `EpisodeRecording.step` when the run is recorded: the step's frame files
 
@@ -108,14 +111,16 @@ class EpisodeRecording:
     def __init__(self, recorder: Recorder | None, on_step: StepCallback | None):
         self.recorder, self.on_step = recorder, on_step
 
-    def start(self, env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, *, spawn_id: str | None,
+    def start(self, env: Environment, pilot: Pilot, task: Mission, config: EpisodeConfig, *, spawn_id: str | None,
               pilot_spec: str | None, safety: SafetyLayer, obs: Observation) -> None:
         if self.recorder is None:
             return
         scene = env.scene
         frames = self.recorder.save_observation(0, obs.front_rgb, obs.rear_rgb)
         self.recorder.start({
-            "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
+            "task": asdict(Task(task.query, task.goal_room, task.goal_target)), "spawn": spawn_id,
+            "scene": scene.name, **({} if not task.recorded else {"mission": {
+                **task.to_dict(), "max_steps": mission_budget(config.max_steps, task)}}),
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
             # a model pilot's conversation memory ('none', 'history=N'); a pilot without the option says nothing
             **({"pilot_memory": memory} if isinstance(memory := getattr(pilot, "memory", None), str) else {}),

@@ -355,6 +355,28 @@ class ModelPilot(BasePilot):
         self.conversation.remember(pilot_input, decision.raw_text)
         return decision
 
+    def complete(self, prompt: Any) -> tuple[str, Usage]:
+        """One call with any prompt of `Prompt`'s shape (the planning call, pilots/planning.py): its raw text
+        (structured output as JSON) and usage. Errors as `decide`'s; a refusal or an empty reply is a PilotError."""
+        import json
+
+        self._gate.enter()
+        t0 = time.perf_counter()
+        try:
+            reply = self._call(prompt)
+        except PilotError as exc:
+            raise scrub(exc, self._secret.value) from None
+        except Exception as exc:  # as in decide: never a crash
+            raise scrub(self._unexpected(exc), self._secret.value) from None
+        usage = self._usage(reply, time.perf_counter() - t0)
+        raw = reply.text if reply.data is None else json.dumps(reply.data, ensure_ascii=False)
+        if reply.stop in ("refusal", "content_filter", "truncated") or not (raw or "").strip():
+            raise PilotReplyError(f"the {self.provider} model {self.model!r} gave no usable answer "
+                                  f"({reply.stop}: {reply.stop_detail or 'no content'})",
+                                  reason=reply.stop if reply.stop != "stop" else "empty",
+                                  raw_text=raw, usage=usage)
+        return raw, usage
+
     def _call(self, prompt: Any, chat: Sequence[Message] | None = None) -> Reply:  # pragma: no cover - abstract
         """Send `chat` (pilots/_history.messages: the earlier turns, then this step's; None: this step's alone)."""
         raise NotImplementedError

@@ -128,6 +128,9 @@ def messages(pilot_input: PilotInput, earlier: Sequence[EarlierTurn], *, jpeg_qu
 
 def single(prompt: Prompt) -> list[Message]:
     """This step's message alone (no history): the context, the state prompt, the image and the step text."""
+    if not prompt.image_jpeg:  # the planning call (pilots/planning.py): no image and no state prompt
+        return [Message("user", tuple(Part(text=t) for t in (prompt.context, prompt.state_prompt, prompt.step_text)
+                                      if t))]
     return [_user(prompt.context, prompt.state_prompt, None, prompt.image_jpeg, prompt.step_text, 0, current=True)]
 
 

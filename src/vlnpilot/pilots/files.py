@@ -153,6 +153,26 @@ class FilesPilot(BasePilot):
         decision = parse_decision(text)  # DecisionError: the controller re-asks with the reason
         return decision.model_copy(update={"model": self.model, "usage": Usage(latency_s=round(latency, 4))})
 
+    def plan(self, prompt: Any) -> tuple[str, Usage]:
+        """The planning call before take-off (pilots/planning.py), as call NNN: DIR/NNN.prompt.md holds the
+        planning rules, the instruction, the map and the answer's JSON schema (no image); the answer is
+        DIR/NNN.answer.json: {"stages": [...], "avoid": [...], "refusal": null}."""
+        self.calls += 1
+        call = f"{self.calls:03d}"
+        text = (f"# Plan before take-off\n\n{prompt.system.rstrip()}\n\n---\n\n{prompt.context.rstrip()}\n\n"
+                f"{prompt.step_text.rstrip()}\n\n---\n\nWrite your answer to `{call}.answer.json`: one JSON object "
+                f"with this schema:\n\n```json\n{json.dumps(prompt.schema, indent=2)}\n```\n")
+        try:
+            (self.directory / "done.txt").unlink(missing_ok=True)
+            write_atomic(self.directory / f"{call}.prompt.md", text.encode("utf-8"))
+            write_atomic(self.directory / "latest.txt", f"{call}\n".encode())
+        except OSError as exc:
+            raise PilotError(f"the files pilot cannot write call {call} in {self.directory}: {exc.strerror or exc}",
+                             fatal=True, reason="files_unwritable") from None
+        t0 = self.clock()
+        answer = self._wait_for_answer(self.directory / f"{call}.answer.json")
+        return answer, Usage(latency_s=round(self.clock() - t0, 4))
+
     def episode_finished(self, result: Any) -> None:
         """Called by run_episode at the end: done.txt tells the answerer that no prompt will follow."""
         line = f"{result.outcome} in {result.steps} steps: {result.reason}\n"

@@ -24,6 +24,7 @@ from vlnpilot.core.tello_spec import horizontal_fov_deg
 from vlnpilot.pilots.base import BasePilot, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.scene.model import Door
+from vlnpilot.tasks.mission import Mission, route
 from vlnpilot.tasks.task import SuccessConfig, Task, parse_query
 
 ALIGN_DEG = 7.5  # half of the smallest rotation: closer than this cannot be improved
@@ -83,6 +84,10 @@ class OraclePilot(BasePilot):
         self.success = o.success
         self._gt: GroundTruth | None = None
         self._task: Task | None = None
+        self._avoid: tuple[str, ...] = ()  # rooms the mission never enters
+        self._stage = 0  # the mission's stage the oracle flies
+        self._waypoint: tuple[float, float] | None = None  # a free point to fly to first (missions)
+        self._centred: set[str] = set()  # rooms whose spawn point this stage has flown to
         self._room: str | None = None
 
     def attach(self, ground_truth: GroundTruth) -> None:
@@ -94,7 +99,7 @@ class OraclePilot(BasePilot):
         scene = self._gt.scene
         if room == goal:
             return None
-        path = scene.room_path(room, goal)
+        path = route(scene, room, goal, self._avoid)
         door = scene.doors_between(path[0], path[1])[0]
         nx, ny = door.normal
         return (door, (nx, ny)) if door.rooms[0] == room else (door, (-nx, -ny))
@@ -121,22 +126,37 @@ class OraclePilot(BasePilot):
     def decide(self, pilot_input: PilotInput) -> Decision:
         if self._gt is None:
             raise VLNPilotError("the oracle needs ground truth: call attach(ground_truth) first")
-        if self._task is None or self._task.query != pilot_input.query:
-            self._task = parse_query(pilot_input.query, self._gt.scene)
+        self._task = self._current_task(pilot_input)
         pose = self._gt.pose()
         self._room = self._gt.room() or self._room
         state = pilot_input.state
+        if pilot_input.mission is not None:
+            self._mission_waypoint(pilot_input, state)
         allowed = state_spec(state, pilot_input.profile).moves
         move, nxt, note = self._policy(state, pose, allowed)
         assert move in allowed, (state, move)
         return Decision(room=self._room or "unknown", movement=move, state=nxt.value, description=note,
                         door_position=self._door_position(pose), model=self.model)
 
+    def _current_task(self, pilot_input: PilotInput) -> Task:
+        """The goal of this step: the mission's current stage (and its rooms to avoid), or the parsed query."""
+        mission = pilot_input.mission
+        if mission is not None:
+            self._avoid = tuple(mission.get("avoid") or ())
+            return Mission.from_dict(mission).task(pilot_input.stage)
+        if self._task is None or self._task.query != pilot_input.query:
+            self._avoid = ()
+            return parse_query(pilot_input.query, self._gt.scene)
+        return self._task
+
     def _policy(self, state: State, pose: Pose, allowed: tuple[str, ...]) -> tuple[str, State, str]:
         task, room = self._task, self._room
         nd = self._next_door(room, task.goal_room) if room else None
         S = State
         if state is S.RECOGNIZE_ROOM:
+            if self._waypoint is not None and math.hypot(self._waypoint[0] - pose.x, self._waypoint[1] - pose.y) > 0.12:
+                return self._goto(pose, *self._waypoint, allowed), S.RECOGNIZE_ROOM, "Moving into the open room."
+            self._waypoint = None
             if nd is None:
                 if task.goal_target is None:
                     return (_rotation(15.0, allowed) or allowed[0]), S.STAY_ON_ROOM, f"I am in the {room}, the goal."
@@ -190,6 +210,34 @@ class OraclePilot(BasePilot):
             return "E", S.FINAL, "Done."
         raise VLNPilotError(f"the oracle has no policy for state {state.value}")
 
+    def _mission_waypoint(self, pilot_input: PilotInput, state: State) -> None:
+        """In a mission, Recognize Room first flies to the room's spawn point when a stage starts away from its
+        goal (it starts wherever the last one ended: in front of an object, beside a door leaf; the oracle's
+        straight lines are proven from the spawn points), and 0.8 m straight on when an object's room is entered
+        (a turn at once may graze the door leaf just passed). One-stage episodes fly exactly as before."""
+        task = self._task
+        if pilot_input.stage != self._stage:
+            self._stage, self._centred = pilot_input.stage, set()
+            if task.goal_room != self._room:
+                self._centred.add(self._room)
+                self._waypoint = self._room_spawn()
+        entering = task.goal_target is not None and self._room == task.goal_room and pilot_input.step > 1
+        if state is State.RECOGNIZE_ROOM and entering and self._room not in self._centred:
+            self._centred.add(self._room)  # straight on, away from the door leaf just passed
+            self._waypoint = self._ahead(self._gt.pose(), 0.8)
+
+    def _ahead(self, pose: Pose, metres: float) -> tuple[float, float] | None:
+        """The point `metres` straight ahead, if it is still in this room."""
+        c, sn = pose.heading()
+        x, y = pose.x + metres * c, pose.y + metres * sn
+        return (x, y) if self._gt.scene.room_at(x, y) == self._room else None
+
+    def _room_spawn(self) -> tuple[float, float] | None:
+        """The room's spawn point: free space from which every route of the room is flown (a stage that ended
+        in front of an object or beside a door leaf would cut a corner on its way to the next door)."""
+        spawn = next((s for s in self._gt.scene.spawns if s.room == self._room), None)
+        return None if spawn is None else (spawn.pose.x, spawn.pose.y)
+
     def _approach_point(self, door: Door, normal: tuple[float, float]) -> tuple[float, float]:
         return door.center[0] - self.approach_m * normal[0], door.center[1] - self.approach_m * normal[1]
 
@@ -212,7 +260,8 @@ class OraclePilot(BasePilot):
         depth, lateral = dx * nx + dy * ny, -dx * ny + dy * nx  # lateral > 0: left of the centre line
         heading_err = wrap_deg(math.degrees(math.atan2(ny, nx)) - pose.yaw_deg)
         aligned = abs(heading_err) <= ALIGN_DEG
-        if aligned and abs(lateral) <= self.lateral_tol_m:
+        # 1 mm of slack: a doorway exactly one lateral move (10 cm) wide of the line would swing D1/D2 forever
+        if aligned and abs(lateral) <= self.lateral_tol_m + 1e-3:
             return "A1", S.GO_THROUGH_DOOR, "Centred on the doorway; going through."
         if aligned and abs(lateral) <= 0.25 and depth < -0.15:
             return ("D2" if lateral > 0 else "D1"), S.ORIENTED_TOWARDS_DOOR, "Centring on the doorway."

@@ -130,6 +130,8 @@ class RemotePilot(BasePilot):
             payload["history"] = [self._turn(t) for t in self.conversation.earlier(pilot_input)]
         if self.model:
             payload["pilot"] = self.model
+        if pilot_input.mission is not None:  # a mission of several stages: the server's prompt shows the plan
+            payload.update(mission=dict(pilot_input.mission), stage=pilot_input.stage)
         return payload
 
     def _turn(self, turn: EarlierTurn) -> dict[str, Any]:
@@ -179,6 +181,21 @@ class RemotePilot(BasePilot):
             return decision.model_copy(update={"usage": decision.usage.model_copy(update={"latency_s": round(
                 latency, 4)})})
         raise self._error(response)
+
+    def plan(self, prompt: Any) -> tuple[str, Usage]:
+        """The planning call (pilots/planning.py), `POST {url}/v1/plan`: the server's pilot plans."""
+        payload = {"system": prompt.system, "context": prompt.context, "step_text": prompt.step_text,
+                   "schema": prompt.schema, **({"pilot": self.model} if self.model else {})}
+        try:
+            response = self._client.post("/v1/plan", json=payload)
+        except httpx.TimeoutException:
+            raise timeout_error(f"pilot server at {self.url}", self.timeout) from None
+        except httpx.TransportError as exc:
+            raise connection_error("pilot server", self.url, exc) from None
+        if response.status_code != 200:
+            raise self._error(response)
+        body = _json(response) or {}
+        return str(body.get("raw_text", "")), Usage.model_validate(body.get("usage") or {})
 
     def _error(self, response: httpx.Response) -> PilotError:
         status = response.status_code

@@ -11,6 +11,7 @@ The controller validates the answer exactly as it validates a model's, and re-as
 
 from __future__ import annotations
 
+import json
 import shutil
 import sys
 import tempfile
@@ -109,14 +110,27 @@ class StdinPilot(BasePilot):
                     "answer with ONE line of JSON: room, movement, state, description, door_position\n> ")
 
         t0 = time.perf_counter()
+        line = self._read_line()
+        latency = time.perf_counter() - t0
+        decision = parse_decision(line)  # DecisionError: the controller re-asks with the reason
+        return decision.model_copy(update={"model": self.model, "usage": Usage(latency_s=round(latency, 4))})
+
+    def plan(self, prompt: Any) -> tuple[str, Usage]:
+        """The planning call before take-off (pilots/planning.py): the planning rules, the instruction and the
+        map, the answer's JSON schema; one JSON line back: {"stages": [...], "avoid": [...], "refusal": null}."""
+        self._print(f"{RULE}\nPLAN (before take-off)\n{RULE}\n{prompt.system.rstrip()}\n\n{prompt.context.rstrip()}\n\n"
+                    f"{prompt.step_text.rstrip()}\n\nJSON schema of the answer:\n{json.dumps(prompt.schema)}\n\n"
+                    "answer with ONE line of JSON: stages, avoid, refusal\n> ")
+        t0 = time.perf_counter()
+        return self._read_line(), Usage(latency_s=round(time.perf_counter() - t0, 4))
+
+    def _read_line(self) -> str:
         line = ""
         while not line.strip():  # blank lines (an Enter pressed twice) are not answers
             line = self.input.readline()
             if line == "":
                 raise PilotError("stdin closed", fatal=True, reason="stdin_closed")
-        latency = time.perf_counter() - t0
-        decision = parse_decision(line.strip())  # DecisionError: the controller re-asks with the reason
-        return decision.model_copy(update={"model": self.model, "usage": Usage(latency_s=round(latency, 4))})
+        return line.strip()
 
     def _print(self, text: str) -> None:
         out = self.output

@@ -228,14 +228,40 @@ def map_rooms(topological_map: Mapping[str, Any]) -> list[str]:
     return list(dict.fromkeys(rooms))
 
 
-def _context(query: str, topological_map: Mapping[str, Any]) -> str:
+def _context(query: str, topological_map: Mapping[str, Any], mission: Mapping[str, Any] | None = None,
+             stage: int = 0) -> str:
     dumped = json.dumps(topological_map, indent=2, sort_keys=True, ensure_ascii=False, default=str)
+    plan = "" if mission is None else mission_text(mission, stage) + "\n"
     return (
-        f"## User query\n{query.strip()}\n\n"
+        f"## User query\n{query.strip()}\n\n{plan}"
         "## Topological map\n"
         "Nodes are rooms (`id`, `name`); edges are open doors between two rooms.\n\n"
         f"```json\n{dumped}\n```\n"
     )
+
+
+_STAGE_GOALS = {  # a stage's goal in the plan, by kind (vlnpilot.tasks.mission.STAGE_KINDS)
+    "room": "go to the room `{room}` and declare `{stay}` there",
+    "object": "find the object `{target}` in the room `{room}` and declare `{describe}` in front of it",
+    "return": "return to the room `{room}`, where the drone started, and declare `{stay}` there",
+}
+
+
+def mission_text(mission: Mapping[str, Any], stage: int) -> str:
+    """The plan of a mission of several stages: every stage, which are done and which is current."""
+    lines = []
+    for i, s in enumerate(mission["stages"]):
+        status = "done" if i < stage else ("current" if i == stage else "to do")
+        goal = _STAGE_GOALS[s["kind"]].format(room=s.get("room"), target=s.get("target"),
+                                              stay=State.STAY_ON_ROOM.value, describe=State.DESCRIBE_OBJECT.value)
+        lines.append(f"- Stage {i + 1} ({status}): {goal}.")
+    if mission.get("avoid"):
+        lines.append("- Throughout: never enter " + ", ".join(f"`{r}`" for r in mission["avoid"])
+                     + ", not even to pass through.")
+    finals = " or ".join(f"`{s.value}`" for s in (State.STAY_ON_ROOM, State.DESCRIBE_OBJECT))
+    return Template(_template("mission.md")).substitute(count=len(mission["stages"]), finals=finals,
+                                                        first_state=State.RECOGNIZE_ROOM.value,
+                                                        stages="\n".join(lines)).rstrip() + "\n"
 
 
 def _step_text(state: State, previous_movement: str | None, step: int, feedback: Sequence[str],
@@ -311,7 +337,7 @@ def build_prompt(pilot_input: PilotInput, *, jpeg_quality: int = 85, max_side: i
     state = pilot_input.state if isinstance(pilot_input.state, State) else parse_state(pilot_input.state)
     return Prompt(
         system=system_prompt(),
-        context=_context(pilot_input.query, pilot_input.topological_map),
+        context=_context(pilot_input.query, pilot_input.topological_map, pilot_input.mission, pilot_input.stage),
         state_prompt=render_state_prompt(state, pilot_input.profile),
         step_text=_step_text(state, pilot_input.previous_movement, pilot_input.step, pilot_input.feedback,
                              pilot_input.context, pilot_input.in_state),

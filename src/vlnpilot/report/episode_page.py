@@ -142,6 +142,7 @@ def _entry(ep: Episode, entry: Entry, plan: Any | None) -> dict[str, Any]:
                  if pose else "–"),
         "room_matches": _room_matches(ep.scene, (entry.decision or {}).get("room"), entry.room_true),
         "extra_json": json.dumps(entry.extra, indent=2) if entry.extra else "", "plan": None,
+        "stage_start": _stage_start(ep, entry),
     }
     at = plan.positions[entry.index] if plan is not None else None
     if at is not None:
@@ -154,7 +155,8 @@ def _entry(ep: Episode, entry: Entry, plan: Any | None) -> dict[str, Any]:
 def _chips(ep: Episode, colors: Mapping[str, str]) -> list[dict[str, str]]:
     chips = []
     for e in ep.entries:
-        flags = []
+        flags = ["stage-start"] if e.stage is not None and e.stage > 1 and e.index > 0 and \
+            ep.entries[e.index - 1].stage != e.stage else []
         if e.failures or e.decision is None and e.step is not None:
             flags.append("flag-fail")
         if e.interventions or e.oscillation_event or (e.proposed and e.executed and e.proposed != e.executed):
@@ -223,3 +225,24 @@ def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) 
     page = render_episode_report(ep, plan_file, plan)
     path = Path(out) if out is not None else run_dir / REPORT
     return write_atomic(path, page)
+
+
+def _stage_start(ep: Episode, entry: Entry) -> dict[str, Any] | None:
+    """Stage 2 and ': find sink in bathroom' on the first step of each stage of a mission of several stages."""
+    if entry.stage is None or entry.step is None:
+        return None
+    earlier = [e.stage for e in ep.entries[:entry.index] if e.step is not None]
+    if earlier and earlier[-1] == entry.stage:
+        return None
+    return {"n": entry.stage, "goal": _stage_goal(ep, entry.stage)}
+
+
+def _stage_goal(ep: Episode, stage: int) -> str:
+    """': find sink in bathroom' for stage `stage` of the run's recorded mission, or nothing."""
+    stages = (ep.summary.get("mission") or {}).get("stages") or []
+    if not 1 <= stage <= len(stages):
+        return ""
+    s = stages[stage - 1]
+    goal = f"find {s.get('target')} in {s.get('room')}" if s.get("kind") == "object" else (
+        f"return to {s.get('room')}" if s.get("kind") == "return" else f"go to {s.get('room')}")
+    return f": {goal}"

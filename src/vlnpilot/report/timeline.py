@@ -57,6 +57,7 @@ class Entry:
     oscillation_event: dict[str, Any] | None = None  # safety.OscillationEvent dict
     feedback: list[str] = field(default_factory=list)  # what the controller tells the pilot in the next prompt
     extra: dict[str, Any] = field(default_factory=dict)  # unknown keys of the record, shown raw
+    stage: int | None = None  # the mission's stage (1-based) this step flew; None: a one-stage episode
 
     @property
     def label(self) -> str:
@@ -176,6 +177,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
             oscillation_event=rec.get("oscillation_event") or None,
             feedback=[str(f) for f in rec.get("safety_feedback") or []],
             extra={k: v for k, v in rec.items() if k not in known and v is not None},  # `override: null` says nothing
+            stage=rec.get("stage"),
         ))
         prev_frames = rec.get("frames") or {}
         prev_room = rec.get("room_true")

@@ -123,6 +123,9 @@ class DecideRequest(BaseModel):
         "client's `history` option); the server remembers nothing between requests")
     pilot: str | None = Field(default=None, description="pilot SPEC (name or name:model); default: the server's",
                               max_length=200)
+    mission: dict[str, Any] | None = Field(default=None, description="a mission of several stages "
+                                           "(vlnpilot.tasks.mission.Mission.to_dict), or null")
+    stage: WholeNumber = Field(default=0, ge=0, le=100, description="the mission's current stage, from 0")
 
 
 class DecideResponse(DecisionFields):
@@ -262,7 +265,8 @@ def _pilot_input(req: DecideRequest, image: np.ndarray) -> PilotInput:
     return PilotInput(image=image, query=req.query, topological_map=req.topological_map, state=state,
                       previous_movement=previous, step=req.step, profile=req.profile,
                       feedback=tuple(str(f)[:500] for f in req.feedback),
-                      context=tuple(str(c)[:500] for c in req.context), in_state=req.in_state, history=history)
+                      context=tuple(str(c)[:500] for c in req.context), in_state=req.in_state, history=history,
+                      mission=req.mission, stage=req.stage)
 
 
 def _earlier_turn(turn: EarlierTurnRequest) -> EarlierTurn:
@@ -372,8 +376,9 @@ def create_app(
         """Liveness: the server answers and names its default pilot (no provider call)."""
         return Health(status="ok", pilot=pilot_spec)
 
-    @app.post("/v1/decide", response_model=DecideResponse, responses=_ERRORS, tags=["pilot"],
-              dependencies=[Depends(check_token)] if token is not None else [])  # declare auth only when it is on
+    auth = [Depends(check_token)] if token is not None else []  # declare auth only when it is on
+
+    @app.post("/v1/decide", response_model=DecideResponse, responses=_ERRORS, tags=["pilot"], dependencies=auth)
     def decide(req: DecideRequest) -> DecideResponse:
         """Ask the pilot for one decision (a blocking provider call, run in the worker thread pool)."""
         spec = allowed_spec(req.pilot)  # the cheap checks first: a refused pilot never has its image decoded
@@ -384,6 +389,7 @@ def create_app(
                 pilot_input = _pilot_input(req, images.decode(header))
             return _ask(get_pilot(spec), pilot_input, req.pilot or pilot_spec)
 
+    _add_plan_route(app, get_pilot, auth)
     return app
 
 
@@ -400,6 +406,52 @@ def _ask(pilot: Pilot, pilot_input: PilotInput, spec: str) -> DecideResponse:
         raise ApiError(502, f"the pilot crashed ({type(exc).__name__})", "pilot_crashed") from None
     return DecideResponse(**decision.core(), usage=decision.usage, model=decision.model or pilot.model,
                           raw_text=decision.raw_text)
+
+
+def _add_plan_route(app: FastAPI, get_pilot: Callable[[str | None], Pilot], auth: list[Any]) -> None:
+    # Not in the OpenAPI document yet: its request is the controller's rendered planning call (docs/missions.md),
+    # and a pilot that does not plan answers 422, which the document's schema-valid-request contract would refuse.
+    @app.post("/v1/plan", response_model=PlanResponse, responses=_ERRORS, tags=["pilot"], dependencies=auth,
+              include_in_schema=False)
+    def plan(req: PlanRequest) -> PlanResponse:
+        """Ask the pilot for a mission's plan before take-off (pilots/planning.py): the answer's raw JSON text."""
+        return _plan(get_pilot(req.pilot), req)
+
+
+def _plan(pilot: Pilot, req: PlanRequest) -> PlanResponse:
+    from vlnpilot.pilots.planning import can_plan
+    from vlnpilot.prompting.render import Prompt
+
+    if not can_plan(pilot):
+        raise ApiError(422, f"pilot {pilot.name!r} does not plan; the controller's parser plans for it",
+                       "cannot_plan", fatal=True)
+    prompt = Prompt(system=req.system, context=req.context, state_prompt="", step_text=req.step_text,
+                    image_jpeg=b"", schema=req.json_schema)
+    ask = getattr(pilot, "plan", None) or pilot.complete
+    try:
+        raw, usage = ask(prompt)
+    except PilotError as exc:
+        raise _pilot_error(exc) from None
+    except VLNPilotError as exc:
+        raise ApiError(502, f"the pilot failed: {exc}", "pilot_error") from None
+    return PlanResponse(raw_text=raw, usage=usage, model=pilot.model)
+
+
+class PlanRequest(BaseModel):
+    """The planning call (pilots/planning.plan_prompt), rendered by the controller."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+    system: str = Field(description="the planning rules", min_length=1, max_length=20_000)
+    context: str = Field(description="the instruction and the map", min_length=1, max_length=100_000)
+    step_text: str = Field(default="", description="the take-off room and a re-ask's feedback", max_length=20_000)
+    json_schema: dict[str, Any] = Field(alias="schema", description="the answer's JSON schema")
+    pilot: str | None = Field(default=None, description="pilot SPEC; default: the server's", max_length=200)
+
+
+class PlanResponse(BaseModel):
+    raw_text: str
+    usage: Usage
+    model: str | None = None
 
 
 def _document_allowed_pilots(app: FastAPI, allowed: list[str]) -> None:

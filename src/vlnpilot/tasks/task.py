@@ -113,7 +113,7 @@ def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessC
     it ends on the target's facing axis, 0.2 m inside the success distance. Where no clear path joins them (a
     start inside the margins of a solid), the straight segments through the door centres stand in.
     """
-    through_doors = _door_waypoints(scene, start, task, config)
+    through_doors = shortest_path_points(scene, start, task, config)
     if len(through_doors) < 2:
         return 0.0
     grid = occupancy(scene, CLEARANCE_M)
@@ -123,8 +123,9 @@ def shortest_path_length(scene: Scene, start: Pose, task: Task, config: SuccessC
     return sum(math.dist(p, q) for p, q in zip(through_doors, through_doors[1:], strict=False))
 
 
-def _door_waypoints(scene: Scene, start: Pose, task: Task, config: SuccessConfig) -> list[tuple[float, float]]:
-    """The start, the centres of the doors on the room path, and the goal point (the start alone when there)."""
+def shortest_path_points(scene: Scene, start: Pose, task: Task, config: SuccessConfig) -> list[tuple[float, float]]:
+    """The start, the centres of the doors on the room path, and the goal point (the start alone when there): the
+    ends of the geodesic path, and where a mission's next stage starts."""
     start_room = scene.room_at(start.x, start.y)
     pts = [(start.x, start.y)]
     if start_room is not None and start_room != task.goal_room:
