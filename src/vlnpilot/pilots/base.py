@@ -67,14 +67,27 @@ _BUILTIN_MODULES = {"oracle": "oracle", "openai": "openai", "gemini": "gemini", 
                     "files": "files"}
 
 
+# The pip extra each built-in pilot's SDK comes with (vlnpilot.extras); the others need only the plain install.
+_BUILTIN_EXTRAS = {"openai": ("openai",), "gemini": ("gemini",), "anthropic": ("anthropic",), "remote": ("server",)}
+
+
 def _load_builtin_pilots(only: str | None = None) -> None:
-    """Import pilot modules (lazily, so that the oracle never pays for the provider SDKs' import time)."""
+    """Import pilot modules (lazily, so that the oracle never pays for the provider SDKs' import time).
+
+    The pilot asked for by name must load (a missing extra says which); listing all of them skips the pilots
+    whose extra is not installed."""
     import importlib
 
-    modules = [_BUILTIN_MODULES[only]] if only in _BUILTIN_MODULES else sorted(set(_BUILTIN_MODULES.values()))
-    for module in modules:
+    from vlnpilot.extras import MissingExtraError, needs
+
+    names = [only] if only in _BUILTIN_MODULES else sorted(_BUILTIN_MODULES)
+    for name in names:
         try:
-            importlib.import_module(f"vlnpilot.pilots.{module}")
+            with needs(*_BUILTIN_EXTRAS.get(name, ()), what=f"the {name} pilot"):
+                importlib.import_module(f"vlnpilot.pilots.{_BUILTIN_MODULES[name]}")
+        except MissingExtraError:
+            if only is not None:
+                raise
         except ModuleNotFoundError as exc:  # a pilot module that does not exist in this version
             if exc.name and exc.name.startswith("vlnpilot.pilots."):
                 continue
@@ -82,8 +95,9 @@ def _load_builtin_pilots(only: str | None = None) -> None:
 
 
 def known_pilots() -> list[str]:
+    """Every pilot name, the built-in ones too when their extra is not installed."""
     _load_builtin_pilots()
-    return sorted(_REGISTRY)
+    return sorted(set(_REGISTRY) | set(_BUILTIN_MODULES))
 
 
 def parse_spec(spec: str) -> tuple[str, str | None]:
@@ -98,7 +112,7 @@ def registration(name: str) -> Registration:
     if name not in _REGISTRY:
         _load_builtin_pilots()
     if name not in _REGISTRY:
-        raise UnknownNameError("pilot", name, _REGISTRY)
+        raise UnknownNameError("pilot", name, known_pilots())
     return _REGISTRY[name]
 
 

@@ -20,6 +20,10 @@ def check_robot(robot: str, tello_host: str | None) -> str:
     key = str(robot).strip().lower()
     if key not in ROBOTS:
         raise UnknownNameError("robot", robot, ROBOTS)
+    if key == "tello":
+        from vlnpilot.extras import require
+
+        require("tello", what="--robot tello")
     if tello_host is not None and key != "tello":
         raise ConfigError("--tello-host applies to --robot tello only")
     if tello_host is not None:
