@@ -2,13 +2,14 @@
 
 Frame k shows what the pilot saw at step k (as the HTML timeline does), the drone's position and heading on
 the plan, and a caption with the step, the state transition and the movement executed. The closing frame
-shows the outcome and is held a little longer. `episode.mp4` is H.264 (imageio-ffmpeg); `episode.gif` is
+shows the outcome and is held a little longer. `episode.mp4` is H.264 (PyAV); `episode.gif` is
 a half-size copy for places that cannot play video (a README, an issue).
 """
 
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -197,26 +198,29 @@ def _write_gif(frames: list[np.ndarray], path: Path, *, fps: float, width: int, 
     return path
 
 
+def _write_mp4(frames: list[np.ndarray], path: Path, *, fps: float, hold: int) -> Path:
+    """H.264 (yuv420p, fast start) with PyAV, the project's one FFmpeg stack; written aside, then moved."""
+    import av
+
+    tmp = path.with_name(path.name + ".tmp.mp4")
+    rate = Fraction(fps).limit_denominator(1000)
+    with av.open(str(tmp), mode="w", options={"movflags": "+faststart"}) as container:
+        stream = container.add_stream("libx264", rate=rate, options={"preset": "veryfast", "crf": "20"})
+        stream.height, stream.width = frames[0].shape[:2]
+        stream.pix_fmt = "yuv420p"
+        for image in [*frames, *[frames[-1]] * max(0, hold - 1)]:
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")))
+        container.mux(stream.encode(None))  # flush the encoder's delayed frames
+    tmp.replace(path)
+    return path
+
+
 def write_episode_video(run_dir: str | Path, *, fps: float = 2.0, gif: bool = True, gif_width: int = 720,
                         hold_last: int = 4, episode: Episode | None = None) -> tuple[Path, Path | None]:
     """Write `episode.mp4` (and `episode.gif` unless `gif=False`) into a run directory; returns their paths."""
-    import imageio.v2 as imageio
-
     run_dir = Path(run_dir)
     ep = episode or load_episode(run_dir)
     frames = episode_frames(ep)
-    mp4 = run_dir / MP4
-    tmp = run_dir / (MP4 + ".tmp.mp4")
-    writer = imageio.get_writer(tmp, fps=fps, codec="libx264", quality=6, pixelformat="yuv420p",
-                                macro_block_size=16, ffmpeg_log_level="error",
-                                output_params=["-preset", "veryfast", "-movflags", "+faststart"])
-    try:
-        for f in frames:
-            writer.append_data(f)
-        for _ in range(max(0, hold_last - 1)):
-            writer.append_data(frames[-1])
-    finally:
-        writer.close()
-    tmp.replace(mp4)
+    mp4 = _write_mp4(frames, run_dir / MP4, fps=fps, hold=hold_last)
     gif_path = _write_gif(frames, run_dir / GIF, fps=fps, width=gif_width, hold=hold_last) if gif else None
     return mp4, gif_path
