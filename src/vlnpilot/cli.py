@@ -8,13 +8,17 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import Annotated
+from typing import TYPE_CHECKING, Annotated
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
 from vlnpilot.errors import VLNPilotError
+
+if TYPE_CHECKING:
+    from vlnpilot.pilots.base import Pilot
+    from vlnpilot.scene import Scene
 
 app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
                   add_completion=False, pretty_exceptions_enable=False)
@@ -189,7 +193,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     raise typer.Exit(exit_code_for([result.outcome]))
 
 
-def _live_station(live: bool, run_dir: Path, pilot: object, scene: object, host: str, port: int):
+def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
     """The live ground station's control for `run --live` (vlnpilot.live), else no control."""
     if not live:
         return contextlib.nullcontext(None)
@@ -424,7 +428,7 @@ def main() -> None:
     except click_errors.ClickException as exc:
         _one_line_error(exc.format_message())
         sys.exit(exc.exit_code)
-    except (KeyboardInterrupt, getattr(click_errors, "Abort", ())):  # Typer >= 0.20 has no Abort
+    except (KeyboardInterrupt, getattr(click_errors, "Abort", KeyboardInterrupt)):  # Typer >= 0.20 has no Abort
         err_console.print("interrupted: every step recorded so far is kept")
         sys.exit(130)
     sys.exit(code if isinstance(code, int) else 0)

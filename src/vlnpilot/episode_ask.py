@@ -123,7 +123,7 @@ class PilotAsker:
         self.pilot, self.task, self.config, self.topo = pilot, task, config, topological_map
         bounded = getattr(pilot, "uses_step_deadline", False)  # network-bound pilots; never the local oracle
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
-        self.context = PilotContext(config.context, config.max_steps)
+        self.context = PilotContext(config.context_config, config.max_steps)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
         self.failed_streak = 0  # consecutive steps without a valid decision (too many end the episode)
@@ -147,16 +147,16 @@ class PilotAsker:
             attempt += 1
             out.usages.append(answer.usage)
             out.fatal = answer.fatal
-            if answer.error is None and needs_confirmation(config.context, answer.decision, out.confirmation):
+            decision = answer.decision if answer.error is None else None
+            if decision is not None and needs_confirmation(config.context_config, decision, out.confirmation):
                 # A final state ends the episode for good: ask once more, with a warning (costs a call, not a step).
-                out.confirmation = {"attempt": attempt - 1, "first": answer.decision.core(),
-                                    "raw_text": answer.decision.raw_text}
-                feedback = [*self.notes, confirmation_note(parse_state(answer.decision.state))]
+                out.confirmation = {"attempt": attempt - 1, "first": decision.core(), "raw_text": decision.raw_text}
+                feedback = [*self.notes, confirmation_note(parse_state(decision.state))]
                 continue
             if answer.error is None:
-                out.decision = answer.decision
-                if out.confirmation is not None:
-                    out.confirmation["confirmed"] = out.decision.state == out.confirmation["first"]["state"]
+                out.decision = decision
+                if out.confirmation is not None and decision is not None:
+                    out.confirmation["confirmed"] = decision.state == out.confirmation["first"]["state"]
                 return out
             reasks += 1
             out.failures.append({"attempt": attempt - 1, "reason": answer.error, "kind": answer.kind,

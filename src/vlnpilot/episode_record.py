@@ -116,7 +116,7 @@ class EpisodeRecording:
             "task": asdict(task), "spawn": spawn_id, "scene": scene.name,
             "pilot": pilot_spec or pilot.name, "pilot_name": pilot.name, "model": pilot.model,
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
-                       "context": {"preset": context_name(config.context), **config.context.to_dict()},
+                       "context": {"preset": context_name(config.context_config), **config.context_config.to_dict()},
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,

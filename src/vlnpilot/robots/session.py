@@ -59,11 +59,11 @@ def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event
     from vlnpilot.robots.tello_config import load_tello_config
 
     config = load_tello_config(**({"host": tello_host} if tello_host else {}))
-    env = TelloEnv(scene, config, event_log=event_log, operator=operator)
+    tello = TelloEnv(scene, config, event_log=event_log, operator=operator)
     try:
-        yield env
+        yield tello
     finally:
-        env.close()
+        tello.close()
 
 
 def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,

@@ -59,6 +59,13 @@ class TelloEnv:
         self._takeoff_t = 0.0
         self._step = 0
 
+    @property
+    def _connected(self) -> TelloLink:
+        """The link of the episode under way (`reset` made it)."""
+        if self.link is None:
+            raise RobotError("the Tello is not connected: reset() starts the episode")
+        return self.link
+
     # -- Environment -----------------------------------------------------------------------------------------
     def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:
         """Connect, check the battery, start the video, take off, reach flight height; the first observation."""
@@ -105,7 +112,7 @@ class TelloEnv:
             pulse = {Kind.FORWARD: cal.forward_10cm, Kind.LATERAL_LEFT: cal.left_10cm,
                      Kind.LATERAL_RIGHT: cal.right_10cm}[cmd.kind]
             lr = {Kind.LATERAL_LEFT: -pulse.speed, Kind.LATERAL_RIGHT: pulse.speed}.get(cmd.kind, 0)
-            self.link.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
+            self._connected.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
             self._pose = cmd.motion().apply(self._pose)
         self._step += 1
         self._update_attitude()
@@ -153,7 +160,7 @@ class TelloEnv:
 
     # -- motions (each sent once) ---------------------------------------------------------------------------
     def _translate(self, sdk: str, motion: Motion) -> None:
-        reply = self.link.send(sdk)
+        reply = self._connected.send(sdk)
         if reply == "ok":
             self.clock.sleep(self.config.calibration.move_settle_s)
             self._pose = motion.apply(self._pose)
@@ -169,14 +176,14 @@ class TelloEnv:
     def _rotate(self, cmd: Command) -> None:
         verb = "cw" if cmd.kind is Kind.ROTATE_RIGHT else "ccw"
         sdk = f"{verb} {round(cmd.amount)}"
-        before = int(self.link.state().get("yaw", 0))
-        reply = self.link.send(sdk)
+        before = int(self._connected.state().get("yaw", 0))
+        reply = self._connected.send(sdk)
         if reply == "ok":
             self.clock.sleep(self.config.calibration.move_settle_s)
             return
         if reply is not None:
             self._land_and_halt(f"the Tello refused '{sdk}': {reply}", "refused")
-        after = self.link.fresh_state() or self.link.state()
+        after = self._connected.fresh_state() or self._connected.state()
         turned = wrap_deg(int(after.get("yaw", before)) - before)  # Tello yaw grows clockwise
         expected = cmd.amount if verb == "cw" else -cmd.amount
         tol = self.config.calibration.yaw_tolerance_deg
@@ -192,16 +199,16 @@ class TelloEnv:
 
     def _update_attitude(self) -> None:
         """Yaw from the state packet (relative to take-off, clockwise), height from the time-of-flight sensor."""
-        state = self.link.fresh_state() or self.link.state()
+        state = self._connected.fresh_state() or self._connected.state()
         yaw = wrap_deg(self._home.yaw_deg - wrap_deg(int(state.get("yaw", self._yaw_ref)) - self._yaw_ref))
         z = int(state.get("tof", round(self._pose.z * 100))) / 100
         self._pose = Pose(self._pose.x, self._pose.y, z, yaw)
 
     def _observe(self, settled_at: float) -> Observation:
-        image, timing = self.link.fresh_frame(settled_at)
-        state = self.link.state()
+        image, timing = self._connected.fresh_frame(settled_at)
+        state = self._connected.state()
         info = {**timing, "battery_pct": state.get("bat"), "tof_cm": state.get("tof"),
-                "keepalives": self.link.keepalives, "events": self._unreported}
+                "keepalives": self._connected.keepalives, "events": self._unreported}
         self._unreported = []
         return Observation(front_rgb=image, rear_rgb=NO_REAR, pose=self._pose, collided=None, step=self._step,
                            info=info)
@@ -209,7 +216,7 @@ class TelloEnv:
     # -- safety -----------------------------------------------------------------------------------------------
     def _check_limits(self) -> None:
         cfg = self.config
-        battery = self.link.state().get("bat")
+        battery = self._connected.state().get("bat")
         if battery is not None and int(battery) < cfg.land_battery_pct:
             self._land_and_halt(f"battery at {battery} %, below the landing floor of {cfg.land_battery_pct} %",
                                 "battery_low")

@@ -138,7 +138,7 @@ class CabinEnv(gym.Env):
         return {
             "front": obs.front_rgb,
             "pose": np.array([p.x, p.y, p.z, p.yaw_deg], np.float32),
-            "collided": int(obs.collided),
+            "collided": int(bool(obs.collided)),  # None (no contact sensing) counts as no collision
         }
 
     def _info(self, obs: Observation, room: str | None = None) -> dict[str, Any]:
