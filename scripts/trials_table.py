@@ -23,6 +23,12 @@ LABELS = {  # the sets in the order the tables list them (a set not named here c
     "houses-long": "unseen houses, longer routes, plus context",
     "houses-fast": "unseen houses, longer routes, plus context, fast profile",
     "houses-objects": "unseen houses, objects of every kind, plus context",
+    "stateless-paper": "after, paper context, one fresh pilot per step (stateless)",
+    "stateless-plus": "after, plus context, one fresh pilot per step (stateless)",
+    "missions": "missions of two stages, cabin, plus context (planning included)",
+    "missions-houses": "missions of two stages, unseen houses, plus context (planning included)",
+    "objects-tof": "unseen houses, low and wide objects, plus context, ToF range sensor",
+    "objects-none": "unseen houses, the same objects, plus context, no range sensor",
 }
 
 
@@ -82,8 +88,10 @@ def trial_lines(sets: dict[str, list[dict]]) -> str:
 
 
 def replace_table(text: str, table: str) -> str:
-    """`text` with the Markdown table that has `table`'s header line replaced by `table`."""
-    start = text.index(table.splitlines()[0])
+    """`text` with the Markdown table whose header starts as `table`'s (its first cell) replaced by `table`:
+    a new set adds a column, so the whole header is not a stable anchor."""
+    first_cell = table.splitlines()[0].split("|")[1]
+    start = text.index(f"|{first_cell}|")
     end = text.find("\n\n", start)
     return text[:start] + table + (text[end:] if end >= 0 else "\n")
 

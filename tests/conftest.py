@@ -12,6 +12,11 @@ import time
 import pytest
 
 from vlnpilot.scene import Scene, load_scene
+from vlnpilot.sim import gl
+
+# Some test modules import mujoco themselves, before the simulator: choose its GL backend first, as the
+# simulator does (headless EGL only if MUJOCO_GL is unset and there is no display).
+gl.choose_backend()
 
 
 @pytest.fixture(scope="session")

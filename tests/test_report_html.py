@@ -119,20 +119,19 @@ def test_timeline_reads_the_keys_the_step_record_writes(tmp_path: Path, monkeypa
 
 
 def test_episode_video(run: Path) -> None:
-    import imageio.v2 as imageio
+    import av
     from PIL import Image
 
     from vlnpilot.report.video import write_episode_video
 
     mp4, gif = write_episode_video(run, hold_last=2)
-    reader = imageio.get_reader(mp4)
-    try:
-        count, fps = reader.count_frames(), reader.get_meta_data()["fps"]
-        first = reader.get_data(0)
-    finally:
-        reader.close()
-    assert count == 9 + 1 and fps == 2.0  # 8 steps, the end, the end held once more
-    height, width = first.shape[:2]
+    with av.open(str(mp4)) as container:
+        stream = container.streams.video[0]
+        frames = [f.to_ndarray(format="rgb24") for f in container.decode(stream)]
+        fps, codec = stream.average_rate, stream.codec_context.name
+    assert len(frames) == 9 + 1 and fps == 2  # 8 steps, the end, the end held once more
+    assert codec == "h264"
+    height, width = frames[0].shape[:2]
     assert height % 16 == 0 and width % 16 == 0 and width > 2 * height
     with Image.open(gif) as im:
         assert im.n_frames == 9 and im.width == 720

@@ -1,11 +1,12 @@
-"""VLN-Pilot: a large vision-language model pilots an indoor drone (embedded MuJoCo simulator)."""
+"""VLN-Pilot: a large vision-language model pilots an indoor drone (embedded MuJoCo simulator).
 
-import os as _os
-import sys as _sys
+Importing the package changes nothing in the process: MuJoCo's GL backend is chosen by the simulator, when it
+is first imported (vlnpilot/sim/gl.py).
+"""
 
-# MuJoCo picks its OpenGL backend when it is first imported: default to headless EGL before that happens,
-# and remember when it is too late (the renderer's error then says how to fix it).
-_MUJOCO_IMPORTED_FIRST = "mujoco" in _sys.modules and "MUJOCO_GL" not in _os.environ
-_os.environ.setdefault("MUJOCO_GL", "egl")
+from importlib.metadata import PackageNotFoundError, version
 
-__version__ = "0.1.0"
+try:
+    __version__ = version("vln-pilot")  # written once, in pyproject.toml
+except PackageNotFoundError:  # a source tree on PYTHONPATH that was never installed
+    __version__ = "0+unknown"

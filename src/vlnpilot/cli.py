@@ -8,13 +8,17 @@ import os
 import signal
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from rich.console import Console
 from rich.markup import escape
 
 from vlnpilot.core.errors import VLNPilotError
+
+if TYPE_CHECKING:
+    from vlnpilot.pilots.base import Pilot
+    from vlnpilot.scene import Scene
 
 app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
                   add_completion=False, pretty_exceptions_enable=False)
@@ -164,8 +168,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     options = _pilot_options(pilot, pilot_option)
     if base_url:
         options["base_url"] = check_base_url(base_url)
+    pilot_obj = make_pilot(pilot, **options)  # first: a pilot whose extra is missing says so
     _say_remote_url(pilot)
-    pilot_obj = make_pilot(pilot, **options)
     check_capabilities(capabilities, robot, shield=shield, pilot=pilot_obj)  # before anything flies
     task = _planned(query, sc, spawn_id, pilot_obj, planner)  # before take-off: a refusal flies nothing
     run_dir = claim_run_dir(out or default_run_dir("runs", f"{spawn_id}-{query}"), overwrite=overwrite)
@@ -196,15 +200,17 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
-    report = _write_episode_report(run_dir, video=video)
-    console.print(f"run directory: {escape(str(run_dir))}  (report: {escape(str(report))})")
+    console.print(f"run directory: {escape(str(run_dir))}  (report: {_optional_report(run_dir, video=video)})")
     raise typer.Exit(exit_code_for([result.outcome]))
 
 
-def _live_station(live: bool, run_dir: Path, pilot: object, scene: object, host: str, port: int):
+def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
     """The live ground station's control for `run --live` (vlnpilot.live), else no control."""
     if not live:
         return contextlib.nullcontext(None)
+    from vlnpilot.core.extras import require
+
+    require("server", "report", what="the live station (--live)")
     from vlnpilot.live.station import live_control
 
     return live_control(run_dir, pilot, scene, host=host, port=port, say=lambda line: console.print(escape(line)))
@@ -272,6 +278,9 @@ def watch(run_dir: Annotated[Path, typer.Argument(help="A run directory, finishe
           host: Annotated[str, typer.Option("--host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
           ) -> None:
     """Open a run in the live ground station's page, read-only, from its files (until Ctrl-C)."""
+    from vlnpilot.core.extras import require
+
+    require("server", "report", what="vln-pilot watch")
     from vlnpilot.live.station import watch_run
 
     watch_run(run_dir, host=host, port=port, say=lambda line: console.print(escape(line)))
@@ -280,9 +289,12 @@ def watch(run_dir: Annotated[Path, typer.Argument(help="A run directory, finishe
 def _say_remote_url(spec: str) -> None:
     """The remote pilot falls back to a local server: say so, rather than silently."""
     from vlnpilot.pilots.base import parse_spec
-    from vlnpilot.pilots.remote import DEFAULT_URL, URL_ENV
 
-    if parse_spec(spec)[0] == "remote" and not os.environ.get(URL_ENV):
+    if parse_spec(spec)[0] != "remote":
+        return
+    from vlnpilot.pilots.remote import DEFAULT_URL, URL_ENV  # only now: it needs the [server] extra
+
+    if not os.environ.get(URL_ENV):
         err_console.print(f"pilot server: {DEFAULT_URL} ({URL_ENV} is not set)", highlight=False)
 
 
@@ -304,7 +316,30 @@ def _sigterm_interrupts():
         signal.signal(signal.SIGTERM, previous)
 
 
+def _optional_report(run_dir: Path, *, video: bool = True, bench: bool = False) -> str:
+    """Write the report after a run or a bench if the [report] extra is installed; else say how to get one."""
+    from vlnpilot.core.extras import MissingExtraError
+
+    try:
+        path = _write_bench_report(run_dir) if bench else _write_episode_report(run_dir, video=video)
+    except MissingExtraError as exc:
+        return escape(f"not written: {exc}; then `vln-pilot report {run_dir}`")
+    return escape(str(path))
+
+
+def _write_bench_report(bench_dir: Path) -> Path:
+    from vlnpilot.core.extras import require
+
+    require("report", what="the report")
+    from vlnpilot.report.html import write_bench_report
+
+    return write_bench_report(bench_dir)
+
+
 def _write_episode_report(run_dir: Path, *, video: bool = True) -> Path:
+    from vlnpilot.core.extras import require
+
+    require("report", what="the report")
     from vlnpilot.report.html import write_episode_report
     from vlnpilot.report.video import write_episode_video
 
@@ -324,9 +359,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
         raise ConfigError(f"{run_dir} is not a directory; give a run directory (with summary.json) or a bench "
                           "directory (with results.jsonl)")
     if (run_dir / "results.jsonl").is_file() and not (run_dir / "summary.json").is_file():
-        from vlnpilot.report.html import write_bench_report
-
-        path = write_bench_report(run_dir)
+        path = _write_bench_report(run_dir)
     else:
         if not (run_dir / "summary.json").is_file():
             raise ConfigError(f"{run_dir} is not a run directory: summary.json is missing")
@@ -376,9 +409,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
                               plugins=tuple(plugin or ()), sensors=sensors)
     if report:
-        from vlnpilot.report.html import write_bench_report
-
-        console.print(f"report: {escape(str(write_bench_report(bench_dir)))}")
+        console.print(f"report: {_optional_report(bench_dir, bench=True)}")
     raise typer.Exit(exit_code_for(r["result"]["outcome"] for r in ResultsLog(bench_dir / RESULTS).read()))
 
 
@@ -396,6 +427,9 @@ def tello_emulator(scene: SceneOpt = "cabin",
                    video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
                    ) -> None:
     """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
+    from vlnpilot.core.extras import require
+
+    require("tello", what="the Tello emulator")
     from vlnpilot.robots.emulator import EmulatorConfig
     from vlnpilot.robots.session import serve_emulator
     from vlnpilot.scene import load_scene
@@ -417,6 +451,9 @@ def serve(host: Annotated[str, typer.Option("--host")] = "127.0.0.1",
     """Serve pilots over HTTP (POST /v1/decide, GET /healthz, OpenAPI at /docs); VLN_PILOT_TOKEN sets a bearer token.
 
     Only --pilot and the --allow SPECs are served; off loopback a token is required."""
+    from vlnpilot.core.extras import require
+
+    require("server", what="vln-pilot serve")
     from vlnpilot.server.app import serve as run_server
 
     if pilot is None:
@@ -444,6 +481,14 @@ def main() -> None:
 
         _one_line_error(str(exc))
         sys.exit(error_exit_code(exc))
+    except ModuleNotFoundError as exc:  # an optional module that no `extras.needs` block named: still one line
+        from vlnpilot.core.extras import missing_extra_message
+
+        message = missing_extra_message(exc)
+        if message is None:
+            raise
+        _one_line_error(message)
+        sys.exit(2)
     except NoArgsIsHelpError as exc:  # a bare `vln-pilot`: the help, as before
         exc.show()
         sys.exit(exc.exit_code)

@@ -118,7 +118,7 @@ def test_inputs_that_used_to_fail_after_take_off_are_refused_before(monkeypatch,
 def test_interrupting_the_video_leaves_no_temporary_file(monkeypatch, flown, tmp_path) -> None:
     import shutil
 
-    import imageio.v2 as imageio
+    import av
 
     from vlnpilot.report.video import write_episode_video
 
@@ -126,21 +126,16 @@ def test_interrupting_the_video_leaves_no_temporary_file(monkeypatch, flown, tmp
     shutil.copytree(flown, run)
     for name in ("episode.mp4", "episode.gif"):
         (run / name).unlink(missing_ok=True)
-    real = imageio.get_writer
+    real, calls = av.VideoFrame.from_ndarray, []
 
-    def interrupted_writer(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
-        writer = real(*args, **kwargs)
-        append = writer.append_data
+    def once_then_interrupt(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202 - the file exists after frame 1
+        calls.append(1)
+        if len(calls) > 1:
+            raise KeyboardInterrupt
+        return real(*args, **kwargs)
 
-        def once_then_interrupt(frame) -> None:  # noqa: ANN001 - ffmpeg starts (and creates the file) on frame 1
-            append(frame)
-            writer.append_data = lambda frame: (_ for _ in ()).throw(KeyboardInterrupt())
-
-        writer.append_data = once_then_interrupt
-        return writer
-
-    monkeypatch.setattr(imageio, "get_writer", interrupted_writer)
+    monkeypatch.setattr(av.VideoFrame, "from_ndarray", once_then_interrupt)
     with pytest.raises(KeyboardInterrupt):
         write_episode_video(run)
-    assert not [n for n in os.listdir(run) if "tmp" in n]  # was episode.mp4.tmp.mp4
+    assert calls and not [n for n in os.listdir(run) if "tmp" in n]  # was episode.mp4.tmp.mp4
     assert not (run / "episode.mp4").exists() and not (run / "episode.gif").exists()

@@ -79,7 +79,7 @@ def house_rows(seed: int) -> list[dict[str, Any]]:
 
 def _routes(scene: Scene) -> list[tuple[str, str, str | None, int]]:
     """(spawn, goal room, target or None, doors crossed) for every spawn and every other room."""
-    out = []
+    out: list[tuple[str, str, str | None, int]] = []
     for s in scene.spawns:
         for r in scene.rooms:
             if r.id == s.room:

@@ -14,7 +14,7 @@ import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, make_dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vlnpilot.episode import measures as episode_measures
 from vlnpilot.episode.measures import Aggregate, Mean
@@ -146,9 +146,12 @@ class CellStats:
 
 
 class _Rates:
+    successes: int  # fields of the derived dataclass (bare annotations here make no fields)
+    episodes: int
+
     @property
     def success_rate(self) -> float:
-        return self.successes / self.episodes if self.episodes else 0.0  # type: ignore[attr-defined]
+        return self.successes / self.episodes if self.episodes else 0.0
 
 
 # The summary's own fields (the measures' aggregates follow): from the outcomes, the steps and the call timings.
@@ -177,7 +180,36 @@ def summary_type() -> type:
     return _summary_class(episode_measures.aggregates())
 
 
-PilotSummary = summary_type()
+if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equal to `summary_type()`
+    @dataclass(frozen=True, kw_only=True)
+    class PilotSummary(_Rates):
+        pilot: str
+        models: tuple[str, ...]
+        episodes: int
+        successes: int
+        ci_low: float
+        ci_high: float
+        mean_steps: float
+        steps_exceeded: int
+        false_successes: int
+        pilot_errors: int
+        latency_p50_s: float | None
+        latency_p95_s: float | None
+        spl: float
+        collisions: int
+        invalid_decisions: int
+        oscillations: int
+        input_tokens: int
+        output_tokens: int
+        cost_usd: float
+        pilot_calls: int
+        interventions: int
+        stages: int
+        isr: float
+        csr: float
+        cgt: float
+else:
+    PilotSummary = summary_type()
 
 
 def cell_stats(records: Iterable[dict[str, Any]]) -> CellStats:

@@ -421,7 +421,7 @@ def _drive(executor: Any, todo: Sequence[EpisodeSpec], log: ResultsLog, chash: s
 
 
 def _append(log: ResultsLog, ev: Event, chash: str) -> None:
-    record = dict(ev.record)
+    record = dict(ev.record or {})
     record["provenance"] = {**record.get("provenance", {}), "config_hash": chash,
                             "finished_at": time.strftime("%Y-%m-%dT%H:%M:%S%z")}
     log.append(record)

@@ -326,7 +326,7 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | Refuse
         errors.append(f"{where}: id {row_id!r} must be letters, digits, '.', '_' or '-' (it names a directory)")
     if len(errors) > before:
         return None
-    return SuiteRow(id=row_id, spawn=spawn, query=query, goal_room=task.goal_room, goal_target=task.goal_target,
+    return SuiteRow(id=row_id, spawn=str(spawn), query=query, goal_room=task.goal_room, goal_target=task.goal_target,
                     scene=scene.name if row_scene is not None else None,
                     mission=None if mission.is_single else mission.to_dict(),
                     sensors=str(sensors) if sensors is not None else None)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import csv
 import io
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from itertools import groupby
 from typing import Any
 
@@ -39,7 +39,7 @@ def _fmt(x: float | None, digits: int = 3) -> str:
     return "--" if x is None else f"{x:.{digits}f}"
 
 
-def _join(values: Sequence[str] | set[str]) -> str:
+def _join(values: Iterable[str | None]) -> str:
     vals = sorted({str(v) for v in values if v is not None})
     return ", ".join(vals) if vals else "--"
 

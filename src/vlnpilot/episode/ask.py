@@ -140,7 +140,7 @@ class PilotAsker:
         self.deadline = Deadline(config.step_deadline_s if bounded else None, pilot)
         self.sensing = sensing  # the drone's range sensors, read once per step
         longer = "A2" in state_spec(State.REACH_OBJECT, config.profile).moves
-        self.context = PilotContext(config.context, max_steps or config.max_steps, sensor, None, longer)
+        self.context = PilotContext(config.context_config, max_steps or config.max_steps, sensor, None, longer)
         self.stage = 0  # the mission's current stage (the episode moves it on)
         self.previous: str | None = None  # the movement executed last step
         self.notes: tuple[str, ...] = ()  # the safety layer's feedback for the next prompt
@@ -177,16 +177,16 @@ class PilotAsker:
             attempt += 1
             out.usages.append(answer.usage)
             out.fatal = answer.fatal
-            if answer.error is None and needs_confirmation(config.context, answer.decision, out.confirmation):
+            decision = answer.decision if answer.error is None else None
+            if decision is not None and needs_confirmation(config.context_config, decision, out.confirmation):
                 # A final state ends the episode for good: ask once more, with a warning (costs a call, not a step).
-                out.confirmation = {"attempt": attempt - 1, "first": answer.decision.core(),
-                                    "raw_text": answer.decision.raw_text}
-                feedback = [*self.notes, confirmation_note(parse_state(answer.decision.state))]
+                out.confirmation = {"attempt": attempt - 1, "first": decision.core(), "raw_text": decision.raw_text}
+                feedback = [*self.notes, confirmation_note(parse_state(decision.state))]
                 continue
             if answer.error is None:
-                out.decision = answer.decision
-                if out.confirmation is not None:
-                    out.confirmation["confirmed"] = out.decision.state == out.confirmation["first"]["state"]
+                out.decision = decision
+                if out.confirmation is not None and decision is not None:
+                    out.confirmation["confirmed"] = decision.state == out.confirmation["first"]["state"]
                 return out
             reasks += 1
             out.failures.append({"attempt": attempt - 1, "reason": answer.error, "kind": answer.kind,

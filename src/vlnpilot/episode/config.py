@@ -42,6 +42,11 @@ class EpisodeConfig:
     # What the pilot is told beyond the paper's five inputs (prompting.context): a preset name or a ContextConfig.
     context: ContextConfig | str = "paper"
 
+    @property
+    def context_config(self) -> ContextConfig:
+        """`context` as the ContextConfig that `__post_init__` made of it (a name given is looked up there)."""
+        return context_preset(self.context)
+
     def __post_init__(self) -> None:
         object.__setattr__(self, "context", context_preset(self.context))
         if not isinstance(self.max_steps, int) or self.max_steps < 1:

@@ -22,7 +22,7 @@ from __future__ import annotations
 import functools
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field, make_dataclass, replace
-from typing import Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import Usage
@@ -172,9 +172,10 @@ class Measure(Protocol):
 class PathAndSpl:
     """Distance flown, the shortest path from the start, and SPL (a bench averages it: Anderson et al. 2018)."""
 
-    fields = (ResultField("path_length_m", float), ResultField("shortest_path_m", float), ResultField("spl", float))
-    aggregates = (Mean("spl"),)
-    columns = (column("spl", md="SPL", tex="SPL", fmt=".3f", csv_fmt=".4f", rank=50),)
+    fields: ClassVar[tuple[ResultField, ...]] = (
+        ResultField("path_length_m", float), ResultField("shortest_path_m", float), ResultField("spl", float))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Mean("spl"),)
+    columns: ClassVar[tuple[Column, ...]] = (column("spl", md="SPL", tex="SPL", fmt=".3f", csv_fmt=".4f", rank=50),)
 
     def reset(self, start: EpisodeStart) -> None:
         self.path = PathLength()
@@ -195,9 +196,9 @@ class PathAndSpl:
 class OscillationCount:
     """Direction reversals of executed moves; `reversed` says whether the last step was one (it is recorded)."""
 
-    fields = (ResultField("oscillations", int),)
-    aggregates = (Total("oscillations"),)
-    columns = (column("oscillations", md="Oscillations", tex="Osc.", rank=120),)
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("oscillations", int),)
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("oscillations"),)
+    columns: ClassVar[tuple[Column, ...]] = (column("oscillations", md="Oscillations", tex="Osc.", rank=120),)
 
     def reset(self, start: EpisodeStart) -> None:
         self.osc = Oscillations()
@@ -214,9 +215,10 @@ class OscillationCount:
 class InvalidDecisions:
     """Executed steps without a valid decision (the drone hovered)."""
 
-    fields = (ResultField("invalid_decisions", int),)
-    aggregates = (Total("invalid_decisions"),)
-    columns = (column("invalid_decisions", md="Invalid decisions", tex="Invalid", rank=110),)
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("invalid_decisions", int),)
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("invalid_decisions"),)
+    columns: ClassVar[tuple[Column, ...]] = (
+        column("invalid_decisions", md="Invalid decisions", tex="Invalid", rank=110),)
 
     def reset(self, start: EpisodeStart) -> None:
         self.count = 0
@@ -241,14 +243,17 @@ class PilotUsage:
     """Tokens, cost, latency and calls of every pilot call, re-asks and unexecuted steps included. (The bench's
     latency percentiles come from its workers' per-call timings, or from `latency_s_total` / `pilot_calls`.)"""
 
-    fields = (ResultField("input_tokens", int), ResultField("cached_tokens", int), ResultField("output_tokens", int),
-              ResultField("cost_usd", float), ResultField("latency_s_total", float), ResultField("pilot_calls", int))
-    aggregates = (Total("input_tokens"), Total("output_tokens"), Total("cost_usd", float), Total("pilot_calls"))
-    columns = (Column(140, "Tokens in/out", "Tokens in/out", ("input_tokens", "output_tokens"), _tokens,
-                      lambda s: (s.input_tokens, s.output_tokens)),
-               Column(145, "Tokens in/call", None, (), _tokens_per_call, lambda s: ()),
-               column("cost_usd", md="Cost (USD)", tex="Cost (\\$)", fmt=".4f", csv_fmt=".6f", rank=150),
-               column("pilot_calls", md=None, tex=None, rank=160))
+    fields: ClassVar[tuple[ResultField, ...]] = (
+        ResultField("input_tokens", int), ResultField("cached_tokens", int), ResultField("output_tokens", int),
+        ResultField("cost_usd", float), ResultField("latency_s_total", float), ResultField("pilot_calls", int))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (
+        Total("input_tokens"), Total("output_tokens"), Total("cost_usd", float), Total("pilot_calls"))
+    columns: ClassVar[tuple[Column, ...]] = (
+        Column(140, "Tokens in/out", "Tokens in/out", ("input_tokens", "output_tokens"), _tokens,
+               lambda s: (s.input_tokens, s.output_tokens)),
+        Column(145, "Tokens in/call", None, (), _tokens_per_call, lambda s: ()),
+        column("cost_usd", md="Cost (USD)", tex="Cost (\\$)", fmt=".4f", csv_fmt=".6f", rank=150),
+        column("pilot_calls", md=None, tex=None, rank=160))
 
     def reset(self, start: EpisodeStart) -> None:
         self.usage, self.calls = Usage(), 0
@@ -275,9 +280,9 @@ class _ReadAtTheEnd:
 
 
 class Collisions(_ReadAtTheEnd):
-    fields = (ResultField("collisions", int),)
-    aggregates = (Total("collisions"),)
-    columns = (column("collisions", md="Collisions", tex="Coll.", rank=70),)
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("collisions", int),)
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("collisions"),)
+    columns: ClassVar[tuple[Column, ...]] = (column("collisions", md="Collisions", tex="Coll.", rank=70),)
 
     def value(self, end: EpisodeEnd) -> dict[str, Any]:
         return {"collisions": int(end.outcome == "collision")}
@@ -286,11 +291,13 @@ class Collisions(_ReadAtTheEnd):
 class SafetyCounts(_ReadAtTheEnd):
     """What the safety layer did: commands it changed, oscillation stretches its guard saw, its name."""
 
-    fields = (ResultField("interventions", int, 0),  # commands changed by the guard, the door assist, the shield
-              ResultField("oscillation_events", int, 0),  # oscillation stretches the guard saw (shield off too)
-              ResultField("shield", str, "off"))
-    aggregates = (Total("interventions", absent=0),)  # results recorded before the safety layer have none
-    columns = (column("interventions", md="Interventions", tex="Interv.", rank=130),)
+    fields: ClassVar[tuple[ResultField, ...]] = (
+        ResultField("interventions", int, 0),  # commands changed by the guard, the door assist, the shield
+        ResultField("oscillation_events", int, 0),  # oscillation stretches the guard saw (shield off too)
+        ResultField("shield", str, "off"))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (
+        Total("interventions", absent=0),)  # results recorded before the safety layer have none
+    columns: ClassVar[tuple[Column, ...]] = (column("interventions", md="Interventions", tex="Interv.", rank=130),)
 
     def value(self, end: EpisodeEnd) -> dict[str, Any]:
         s = end.safety
@@ -413,12 +420,14 @@ def columns() -> tuple[Column, ...]:
 
 
 class _ResultMethods:
+    outcome: str  # a field of the derived dataclass (a bare annotation here makes no field)
+
     @property
     def success(self) -> bool:
-        return self.outcome == "success"  # type: ignore[attr-defined]
+        return self.outcome == "success"
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)  # type: ignore[call-overload]
+        return asdict(self)  # type: ignore[call-overload]  # a dataclass once derived
 
 
 _RESULT_DOC = """One episode's result: a frozen dataclass whose fields are laid out by `MEASURES` (`result_type`).
@@ -444,7 +453,39 @@ def result_type() -> type:
     return _result_class(MEASURES)
 
 
-EpisodeResult = result_type()
+if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equal to `result_type()`
+    @dataclass(frozen=True, kw_only=True)
+    class EpisodeResult(_ResultMethods):
+        outcome: str
+        reason: str
+        steps: int
+        path_length_m: float
+        shortest_path_m: float
+        spl: float
+        collisions: int
+        invalid_decisions: int
+        oscillations: int
+        final_state: str
+        final_room: str | None
+        contact: str | None
+        input_tokens: int
+        cached_tokens: int
+        output_tokens: int
+        cost_usd: float
+        latency_s_total: float
+        pilot_calls: int
+        wall_time_s: float
+        interventions: int = 0
+        oscillation_events: int = 0
+        shield: str = "off"
+        judged_by: str = "ground_truth"
+        stages: int = 1
+        stages_reached: int | None = None
+        failed_stage: int | None = None
+        stage_starts: list | None = None
+        stage_paths_m: list | None = None
+else:
+    EpisodeResult = result_type()
 EPISODE_FIELDS = tuple(f.name for m in MEASURES if isinstance(m, FilledByTheEpisode) for f in m.fields)
 
 

@@ -125,7 +125,7 @@ class EpisodeRecording:
             # a model pilot's conversation memory ('none', 'history=N'); a pilot without the option says nothing
             **({"pilot_memory": memory} if isinstance(memory := getattr(pilot, "memory", None), str) else {}),
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
-                       "context": {"preset": context_name(config.context), **config.context.to_dict()},
+                       "context": {"preset": context_name(config.context_config), **config.context_config.to_dict()},
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,

@@ -21,7 +21,9 @@ def plan_png(scene: Scene) -> tuple[bytes, dict[str, float]]:
     fig = Figure(figsize=(WIDTH_IN, height), dpi=DPI)
     ax = fig.add_axes((0, 0, 1, 1))
     draw_floorplan(scene, ax)
-    ax.get_legend().remove()
+    legend = ax.get_legend()
+    if legend is not None:
+        legend.remove()
     ax.set_title("")
     ax.set_axis_off()
     ax.set_aspect("auto")  # the figure already has the plan's proportions; the axes must fill it exactly

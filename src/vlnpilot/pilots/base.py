@@ -9,6 +9,7 @@ from typing import Any, Protocol, runtime_checkable
 from vlnpilot.core.decision import NO_TRAITS, Decision, PilotInput, PilotTraits, traits_of
 from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import ConfigError, VLNPilotError
+from vlnpilot.core.extras import needs
 from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 
@@ -124,7 +125,12 @@ def register_pilot(name: str, *, options: type[PilotOptions] = OpenPilotOptions
     return deco
 
 
+# The pip extra each built-in pilot's SDK comes with (vlnpilot.core.extras); the others need only the plain install.
+_BUILTIN_EXTRAS = {"openai": ("openai",), "gemini": ("gemini",), "anthropic": ("anthropic",), "remote": ("server",)}
+
+
 def known_pilots() -> list[str]:
+    """Every pilot name, the built-in ones too when their extra is not installed (listing imports none of them)."""
     return sorted(PILOT_REGISTRY.names())
 
 
@@ -146,7 +152,8 @@ def check_spec_syntax(spec: str) -> None:
 
 def registration(name: str) -> Registration:
     """The registration of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
-    return PILOT_REGISTRY.get(name)
+    with needs(*_BUILTIN_EXTRAS.get(name, ()), what=f"the {name} pilot"):  # a missing extra says which
+        return PILOT_REGISTRY.get(name)
 
 
 def pilot_factory(name: str) -> PilotFactory:

@@ -29,6 +29,7 @@ from vlnpilot.prompting.render import Prompt, _template
 from vlnpilot.scene.model import Scene
 from vlnpilot.tasks.mission import STAGE_KINDS, Mission, PlanError, Stage, offers, validate_mission
 from vlnpilot.tasks.mission_parser import plan_mission
+from vlnpilot.tasks.task import check_query_text
 
 MAX_REASKS = 1  # an invalid plan is asked again once, with the reason
 PLANNERS = ("auto", "pilot", "parser")  # auto: the pilot plans what is not a plain one-goal query, if it plans
@@ -124,6 +125,7 @@ def plan_instruction(query: str, scene: Scene, start_room: str | None, pilot: Pi
     """The mission to fly, by `planner`: `parser`; `pilot` (a pilot that plans; validated, re-asked once); or
     `auto`: a plain one-goal query the parser reads as today (no planning call, so every such run flies as
     before), anything else by the pilot if it plans, else by the parser."""
+    check_query_text(query)  # before any planning call: no pilot is sent a query it could not be sent
     planning = Planning()
     if planner not in PLANNERS:
         raise PlanError(f"unknown planner {planner!r}; valid planners: {', '.join(PLANNERS)}")

@@ -202,7 +202,9 @@ def save_floorplan(scene: Scene, path: str | Path, *, dpi: int = 120, **kw: Any)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     ax = draw_floorplan(scene, **kw)
-    ax.figure.savefig(path, dpi=dpi)
+    fig = ax.get_figure(root=True)
+    assert fig is not None  # draw_floorplan's axes always sit on a figure
+    fig.savefig(path, dpi=dpi)
     return path
 
 

@@ -21,6 +21,7 @@ from matplotlib import rc_context, ticker  # noqa: E402
 from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
 from matplotlib.colors import to_hex  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.typing import RcKeyType  # noqa: E402
 
 from vlnpilot.episode.config import OUTCOMES  # noqa: E402
 
@@ -35,7 +36,7 @@ HALF = (6.4, 4.0)  # figures shown side by side; FULL_W: figures shown across th
 FULL_W = 12.8
 PILOT_COLORS = ("#3b6fb6", "#e07b39", "#4a9d5b", "#c2464f", "#7d5fb2", "#8c6d46", "#d36fb0", "#6f7780")
 
-STYLE = {
+STYLE: dict[RcKeyType, Any] = {
     "font.size": 10, "axes.titlesize": 11, "axes.titleweight": "bold", "axes.labelsize": 10,
     "axes.spines.top": False, "axes.spines.right": False, "axes.edgecolor": "#555", "axes.grid": True,
     "grid.color": "#e3e5ea", "grid.linewidth": 0.8, "axes.axisbelow": True, "legend.frameon": False,
@@ -163,7 +164,7 @@ def plot_success_rates(pilots: Sequence[str], successes: Sequence[int], totals: 
         ax.bar(x, rates, width=0.6, color=[pilot_color(i) for i in range(len(pilots))], zorder=2)
         ax.errorbar(x, rates, yerr=[lo, hi], fmt="none", ecolor="#222", capsize=6, linewidth=1.2, zorder=3)
         for xi, r, k, n, c in zip(x, rates, successes, totals, ci, strict=True):
-            ax.text(xi, c[1] + 0.03, f"{r:.0%}\n{k}/{n}", ha="center", va="bottom", fontsize=9)
+            ax.text(float(xi), c[1] + 0.03, f"{r:.0%}\n{k}/{n}", ha="center", va="bottom", fontsize=9)
         ax.set_xticks(x, pilots, rotation=0 if len(pilots) < 4 else 20, ha="center" if len(pilots) < 4 else "right")
         ax.set_ylim(0, 1.22)
         ax.set_yticks(np.linspace(0, 1, 6))
@@ -258,7 +259,7 @@ def plot_outcomes(pilots: Sequence[str], counts: Mapping[str, Mapping[str, int]]
                     zorder=2)
             for yi, l, v in zip(y, left, vals, strict=True):
                 if v:
-                    ax.text(l + v / 2, yi, f"{int(v)}", ha="center", va="center", color="white", fontsize=9,
+                    ax.text(l + v / 2, float(yi), f"{int(v)}", ha="center", va="center", color="white", fontsize=9,
                             fontweight="bold")
             left += vals
         ax.set_yticks(y, pilots)

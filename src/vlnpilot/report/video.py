@@ -2,7 +2,7 @@
 
 Frame k shows what the pilot saw at step k (as the HTML timeline does), the drone's position and heading on
 the plan, and a caption with the step, the state transition and the movement executed. The closing frame
-shows the outcome and is held a little longer. `episode.mp4` is H.264 (imageio-ffmpeg); `episode.gif` is
+shows the outcome and is held a little longer. `episode.mp4` is H.264 (PyAV); `episode.gif` is
 a half-size copy for places that cannot play video (a README, an issue).
 """
 
@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import math
 from collections.abc import Iterator
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -199,30 +200,34 @@ def _write_gif(frames: list[np.ndarray], path: Path, *, fps: float, width: int, 
     return path
 
 
+def _write_mp4(frames: list[np.ndarray], path: Path, *, fps: float, hold: int) -> Path:
+    """H.264 (yuv420p, fast start) with PyAV, the project's one FFmpeg stack; written aside, then moved."""
+    import av
+
+    rate = Fraction(fps).limit_denominator(1000)
+    with (_written_through(path.with_name(f".{path.name}.tmp.mp4"), path) as tmp,  # the format from the suffix
+          av.open(str(tmp), mode="w", options={"movflags": "+faststart"}) as container):
+        stream = container.add_stream("libx264", rate=rate, options={"preset": "veryfast", "crf": "20"})
+        stream.height, stream.width = frames[0].shape[:2]
+        stream.pix_fmt = "yuv420p"
+        for image in [*frames, *[frames[-1]] * max(0, hold - 1)]:
+            container.mux(stream.encode(av.VideoFrame.from_ndarray(image, format="rgb24")))
+        container.mux(stream.encode(None))  # flush the encoder's delayed frames
+    return path
+
+
 def write_episode_video(run_dir: str | Path, *, fps: float = 2.0, gif: bool = True, gif_width: int = 720,
                         hold_last: int = 4, episode: Episode | None = None) -> tuple[Path, Path | None]:
     """Write `episode.mp4` (and `episode.gif` unless `gif=False`) into a run directory; returns their paths."""
-    import imageio.v2 as imageio
-
     run_dir = Path(run_dir)
     ep = episode or load_episode(run_dir)
     frames = episode_frames(ep)
-    mp4 = run_dir / MP4
-    with _written_through(run_dir / f".{MP4}.tmp.mp4", mp4) as tmp:  # ffmpeg reads the format off the suffix
-        writer = imageio.get_writer(tmp, fps=fps, codec="libx264", quality=6, pixelformat="yuv420p",
-                                    macro_block_size=16, ffmpeg_log_level="error",
-                                    output_params=["-preset", "veryfast", "-movflags", "+faststart"])
-        try:
-            for f in frames:
-                writer.append_data(f)
-            for _ in range(max(0, hold_last - 1)):
-                writer.append_data(frames[-1])
-        finally:
-            writer.close()
+    mp4 = _write_mp4(frames, run_dir / MP4, fps=fps, hold=hold_last)
     gif_path = None
     if gif:
         with _written_through(run_dir / f".{GIF}.tmp.gif", run_dir / GIF) as tmp:
-            gif_path = _write_gif(frames, tmp, fps=fps, width=gif_width, hold=hold_last).with_name(GIF)
+            _write_gif(frames, tmp, fps=fps, width=gif_width, hold=hold_last)
+        gif_path = run_dir / GIF
     return mp4, gif_path
 
 

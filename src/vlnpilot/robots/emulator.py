@@ -15,6 +15,7 @@ import random
 import socket
 import threading
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -207,7 +208,8 @@ class TelloEmulator:
         if not self.sdk_mode:
             return None  # outside SDK mode the Tello ignores text commands
         if verb == "rc":
-            return self._set_rc(args)
+            self._set_rc(args)
+            return None  # rc has no reply
         if verb in QUERIES:
             return self._query(verb)
         if text.strip().lower() == "ext tof?" and self.config.ext_tof:
@@ -319,7 +321,7 @@ class TelloEmulator:
             if self.video.running:
                 self.video.target = (self._client or self.config.host, self.config.video_port)
 
-    def state(self) -> dict[str, object]:
+    def state(self) -> dict[str, Any]:
         """The fields of a Tello SDK 2.0 state packet (yaw relative to take-off heading, + clockwise)."""
         pose = self.pose
         height_cm = int(round(pose.z * 100)) if self.flying else 0

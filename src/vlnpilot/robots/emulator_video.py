@@ -51,7 +51,7 @@ class VideoStreamer:
         self.frames_sent = 0
         self.on = threading.Event()
         self._stop = threading.Event()
-        self._codec: av.CodecContext | None = None
+        self._codec: av.VideoCodecContext | None = None
         self._pending: deque[tuple[float, bytes]] = deque()  # (due time, encoded access unit)
         self.codec = pick_codec()
         self._thread = threading.Thread(target=self._run, name="tello-emulator-video", daemon=True)
@@ -72,8 +72,9 @@ class VideoStreamer:
         self._stop.set()
         self._thread.join(timeout=10)
 
-    def _encoder(self, height: int, width: int) -> av.CodecContext:
+    def _encoder(self, height: int, width: int) -> av.VideoCodecContext:
         ctx = av.CodecContext.create(self.codec, "w")
+        assert isinstance(ctx, av.VideoCodecContext)  # every codec of CODECS is a video encoder
         ctx.width, ctx.height = width, height
         ctx.pix_fmt = "yuv420p"
         ctx.time_base = Fraction(1, int(self.fps))

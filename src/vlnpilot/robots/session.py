@@ -21,6 +21,10 @@ def check_robot(robot: str, tello_host: str | None) -> str:
     key = str(robot).strip().lower()
     if key not in ROBOTS:
         raise UnknownNameError("robot", robot, ROBOTS)
+    if key == "tello":
+        from vlnpilot.core.extras import require
+
+        require("tello", what="--robot tello")
     if tello_host is not None and key != "tello":
         raise ConfigError("--tello-host applies to --robot tello only")
     if tello_host is not None:
@@ -66,11 +70,11 @@ def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event
     from vlnpilot.robots.tello_config import load_tello_config
 
     config = load_tello_config(**({"host": tello_host} if tello_host else {}))
-    env = TelloEnv(scene, config, event_log=event_log, operator=operator, sensors=sensors)
+    tello = TelloEnv(scene, config, event_log=event_log, operator=operator, sensors=sensors)
     try:
-        yield env
+        yield tello
     finally:
-        env.close()
+        tello.close()
 
 
 def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,

@@ -81,6 +81,13 @@ class TelloEnv:
         self._takeoff_t = 0.0
         self._step = 0
 
+    @property
+    def _connected(self) -> TelloLink:
+        """The link of the episode under way (`reset` made it)."""
+        if self.link is None:
+            raise RobotError("the Tello is not connected: reset() starts the episode")
+        return self.link
+
     # -- Environment -----------------------------------------------------------------------------------------
     def ranges(self) -> tuple[RangeReading, ...]:
         """The TT's forward ToF (`EXT tof?`, mm, 8192 beyond range); () without it or when no reply came."""
@@ -208,7 +215,7 @@ class TelloEnv:
 
     # -- motions (each sent once) ---------------------------------------------------------------------------
     def _translate(self, sdk: str, motion: Motion) -> None:
-        reply = self.link.send(sdk)
+        reply = self._connected.send(sdk)
         if reply == "ok":
             self.clock.sleep(self.config.calibration.move_settle_s)
             self._pose = motion.apply(self._pose)
@@ -226,8 +233,8 @@ class TelloEnv:
         """Whether the rotation happened: its "ok", or with the reply lost, the yaw of a state packet after it."""
         verb = "cw" if cmd.kind is Kind.ROTATE_RIGHT else "ccw"
         sdk = f"{verb} {round(cmd.amount)}"
-        before = int(self.link.state().get("yaw", 0))
-        reply = self.link.send(sdk)
+        before = int(self._connected.state().get("yaw", 0))
+        reply = self._connected.send(sdk)
         if reply == "ok":
             self.clock.sleep(self.config.calibration.move_settle_s)
             return True
@@ -283,7 +290,7 @@ class TelloEnv:
 
     def _update_attitude(self) -> None:
         """Yaw from the state packet (relative to take-off, clockwise), height from the time-of-flight sensor."""
-        state = self.link.fresh_state() or self.link.state()
+        state = self._connected.fresh_state() or self._connected.state()
         yaw = wrap_deg(self._home.yaw_deg - wrap_deg(int(state.get("yaw", self._yaw_ref)) - self._yaw_ref))
         z = int(state.get("tof", round(self._pose.z * 100))) / 100
         self._pose = Pose(self._pose.x, self._pose.y, z, yaw)
@@ -301,7 +308,7 @@ class TelloEnv:
     # -- safety -----------------------------------------------------------------------------------------------
     def _check_limits(self) -> None:
         cfg = self.config
-        battery = self.link.state().get("bat")
+        battery = self._connected.state().get("bat")
         if battery is not None and int(battery) < cfg.land_battery_pct:
             self._land_and_halt(f"battery at {battery} %, below the landing floor of {cfg.land_battery_pct} %",
                                 "battery_low")

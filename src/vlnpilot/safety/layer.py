@@ -100,21 +100,22 @@ class SafetyLayer:
                 cmd = fix[0]
 
         if self.active and self.shield is not None:
-            safe, why = self.shield.filter(pose, cmd)
+            safe, blocked = self.shield.filter(pose, cmd)
             side = None
-            if why is not None and cfg.door_assist and state in DOOR_STATES and cmd.kind is Kind.FORWARD \
+            if blocked is not None and cfg.door_assist and state in DOOR_STATES and cmd.kind is Kind.FORWARD \
                     and safe.kind is Kind.NONE:
                 side = self.assist.centring(pose)  # blocked near a doorway: step towards its centre line instead
             if side is not None and self.shield.hazard(pose, side[0].motion()) is None:
-                fix, al = side
-                text = (f"{cmd.code} is blocked ({why}); the drone is {abs(al.lateral_m) * 100:.0f} cm off the centre "
-                        f"line of the doorway, so it moves {'right' if al.lateral_m > 0 else 'left'} 10 cm instead")
-                found.append(Intervention(step, "door_assist", cmd.code, fix.code, text))
+                centring, al = side
+                text = (f"{cmd.code} is blocked ({blocked}); the drone is {abs(al.lateral_m) * 100:.0f} cm off the "
+                        f"centre line of the doorway, so it moves {'right' if al.lateral_m > 0 else 'left'} 10 cm "
+                        "instead")
+                found.append(Intervention(step, "door_assist", cmd.code, centring.code, text))
                 notes.append(f"{ASSIST_NOTE}: {text}.")
-                cmd = fix
-            elif why is not None:
-                found.append(Intervention(step, "shield", cmd.code, safe.code, why))
-                notes.append(f"{SHIELD_NOTE}: {cmd.code} ({cmd.description}) is unsafe: {why}; executed "
+                cmd = centring
+            elif blocked is not None:
+                found.append(Intervention(step, "shield", cmd.code, safe.code, blocked))
+                notes.append(f"{SHIELD_NOTE}: {cmd.code} ({cmd.description}) is unsafe: {blocked}; executed "
                              f"{safe.code} ({safe.description}) instead.")
                 cmd = safe
 

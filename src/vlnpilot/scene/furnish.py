@@ -147,6 +147,7 @@ def _place(rng: random.Random, r: PlanRoom, frames: dict[str, WallFrame], door_s
         if view is not None and target is not None:
             keep.append(view)  # later tall pieces keep out of the target's view
             name_, aliases = TARGET_NAMES[target]
+            assert piece.front is not None, f"{target} has no front face"  # every target piece has one
             out.targets.append(Target(target, name_, r.id, piece.front, round(f.facing_deg, 1), aliases))
         out.solids.extend(piece.solids)
         return piece

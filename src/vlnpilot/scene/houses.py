@@ -70,7 +70,8 @@ def parse_house_name(name: str) -> HouseSpec:
     if not re.fullmatch(r"\d{1,9}", seed_text.strip()):
         raise HouseSpecError(f"bad house seed {seed_text!r} in {name!r}: give a whole number 0..999999999, "
                              "e.g. house:7 or house:7?rooms=4")
-    rooms, types = None, ()
+    rooms: int | None = None
+    types: tuple[str, ...] = ()
     for part in filter(None, query.split("&")):
         key, _, value = part.partition("=")
         key = key.strip().lower()

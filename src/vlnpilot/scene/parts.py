@@ -99,9 +99,9 @@ def doorway(door: Door, wall_t: float, *, leaf_into: int | None, hinge: str) -> 
         solids.append(_door_box(door, f"{door.id}_leaf", -leaf_t / 2, leaf_t / 2, -w / 2, w / 2, 0.01, h - 0.01,
                                 "front_door"))
         knob_s = -w / 2 + 0.08 if hinge == "left" else w / 2 - 0.08
-        for sign in (-1, 1):
-            solids.append(_door_box(door, f"{door.id}_handle_{'in' if sign < 0 else 'out'}",
-                                    sign * leaf_t / 2, sign * (leaf_t / 2 + 0.06), knob_s - 0.02, knob_s + 0.02,
+        for side in (-1, 1):
+            solids.append(_door_box(door, f"{door.id}_handle_{'in' if side < 0 else 'out'}",
+                                    side * leaf_t / 2, side * (leaf_t / 2 + 0.06), knob_s - 0.02, knob_s + 0.02,
                                     0.98, 1.02, "chrome"))
         return solids
     sign = -1.0 if leaf_into == 0 else 1.0  # depth direction of the room the leaf opens into

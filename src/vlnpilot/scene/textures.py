@@ -28,7 +28,8 @@ def _smooth_noise(rng: np.random.Generator, shape: tuple[int, int], scale: int) 
     """Value noise in [0, 1]: a coarse random grid upsampled bilinearly."""
     h, w = shape
     coarse = rng.random((h // scale + 2, w // scale + 2))
-    img = Image.fromarray((coarse * 255).astype(np.uint8)).resize((w + 2 * scale, h + 2 * scale), Image.BILINEAR)
+    img = Image.fromarray((coarse * 255).astype(np.uint8)).resize((w + 2 * scale, h + 2 * scale),
+                                                                  Image.Resampling.BILINEAR)
     return np.asarray(img, dtype=np.float32)[scale : scale + h, scale : scale + w] / 255.0
 
 

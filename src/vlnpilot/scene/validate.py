@@ -159,8 +159,8 @@ def _straight_legs(scene: Scene, grid: Grid) -> None:
                     raise HouseInvalid(f"room {r.id}: no straight flyable leg from ({a[0]:.2f}, {a[1]:.2f}) to "
                                        f"({b[0]:.2f}, {b[1]:.2f})")
     for d in scene.open_doors():
-        a, b = (approach_points(scene, room) for room in d.rooms)
-        pa = min(a, key=lambda p: math.dist(p, d.center))
-        pb = min(b, key=lambda p: math.dist(p, d.center))
+        side_a, side_b = (approach_points(scene, room) for room in d.rooms)
+        pa = min(side_a, key=lambda p: math.dist(p, d.center))
+        pb = min(side_b, key=lambda p: math.dist(p, d.center))
         if not grid.segment_free(pa, pb):
             raise HouseInvalid(f"door {d.id}: the crossing on its centre line is not clear")

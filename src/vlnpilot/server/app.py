@@ -165,7 +165,8 @@ def _error_response(status: int, body: ErrorBody, headers: dict[str, str] | None
     return JSONResponse(status_code=status, content=body.model_dump(mode="json", exclude_none=True), headers=headers)
 
 
-_ERRORS = {code: {"model": ErrorBody} for code in (400, 401, 403, 413, 415, 422, 502, 503)}
+_ERRORS: dict[int | str, dict[str, Any]] = {
+    code: {"model": ErrorBody} for code in (400, 401, 403, 413, 415, 422, 502, 503)}
 
 
 # ------------------------------------------------------------------------------------------ body limit

@@ -142,7 +142,7 @@ class CabinEnv(gym.Env):
         return {
             "front": obs.front_rgb,
             "pose": np.array([p.x, p.y, p.z, p.yaw_deg], np.float32),
-            "collided": int(obs.collided),
+            "collided": int(bool(obs.collided)),  # None (no contact sensing) counts as no collision
             **(ranges if self.sim.range_sensor is not None else {}),
         }
 

@@ -28,8 +28,8 @@ class HouseEnv(gym.Env):
     def __init__(self, house: int = 0, rooms: int | None = None, *, max_steps: int = 150, width: int = 640,
                  height: int = 480, render_mode: str | None = None, sensors: str = "none"):
         self._spec = HouseSpec(int(house), rooms)
-        self._kwargs = {"max_steps": max_steps, "width": width, "height": height, "render_mode": render_mode,
-                        "sensors": sensors}
+        self._kwargs: dict[str, Any] = {"max_steps": max_steps, "width": width, "height": height,
+                                        "render_mode": render_mode, "sensors": sensors}
         self.render_mode = render_mode
         self._env: CabinEnv | None = None
         self.action_space = spaces.Discrete(len(COMMANDS))

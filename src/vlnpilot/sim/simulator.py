@@ -10,23 +10,20 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+from vlnpilot.sim import gl
+
+gl.choose_backend()  # before MuJoCo's first import fixes its GL backend (only if unset, only without a display)
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
 from vlnpilot.core.commands import Command, get_command  # noqa: E402
-from vlnpilot.core.environment import (
-    Capabilities,  # noqa: E402
-    GroundTruth,
-)
+from vlnpilot.core.environment import Capabilities, GroundTruth  # noqa: E402
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
 from vlnpilot.core.ranging import RangeReading, range_sensor  # noqa: E402
 from vlnpilot.core.records import Footprint, Motion, Observation, Pose  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
-from vlnpilot.sim import (
-    drone,  # noqa: E402
-    gl,  # noqa: F401  (selects the headless GL backend before mujoco is imported)
-)
+from vlnpilot.sim import drone  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)

@@ -1,0 +1,43 @@
+"""The package's own files (issue 21): one version (pyproject, read back from the metadata), `python -m
+vlnpilot`, the licence and the citation."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+import tomllib
+from importlib.metadata import version
+from pathlib import Path
+
+import yaml
+
+import vlnpilot
+
+ROOT = Path(__file__).resolve().parents[1]
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+
+
+def test_the_version_is_written_once_and_read_from_the_metadata() -> None:
+    assert vlnpilot.__version__ == version("vln-pilot")
+    written = re.compile(rf"['\"]{re.escape(PYPROJECT['version'])}['\"]")
+    hits = [p for p in (ROOT / "src").rglob("*.py") if written.search(p.read_text())]
+    assert hits == [], f"a version literal outside pyproject.toml: {hits}"
+
+
+def test_python_m_vlnpilot_is_the_command_line() -> None:
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "src")}
+    proc = subprocess.run([sys.executable, "-m", "vlnpilot", "run", "x", "--scene", "nowhere"], env=env,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2 and "unknown scene 'nowhere'" in proc.stderr
+
+
+def test_the_licence_and_the_citation() -> None:
+    assert PYPROJECT["license"] == "MIT" and "MIT License" in (ROOT / "LICENSE").read_text()
+    cff = yaml.safe_load((ROOT / "CITATION.cff").read_text())
+    assert cff["cff-version"] == "1.2.0" and cff["license"] == "MIT" and cff["title"] == "VLN-Pilot"
+    paper = cff["preferred-citation"]
+    assert paper["title"] == "VLN-Pilot: Large Vision-Language Model as an Autonomous Indoor Drone Operator"
+    assert [a["family-names"] for a in paper["authors"]] == ["Dominguez-Dager", "Suescun-Ferrandiz", "Escalona",
+                                                           "Gomez-Donoso", "Cazorla"]
