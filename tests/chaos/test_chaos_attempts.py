@@ -93,3 +93,15 @@ def test_the_step_record_has_each_calls_attempts_and_its_wall_time(geo_sim, tmp_
     steps = [s for s in steps if "step" in s]
     assert [[a.get("status") for a in call] for call in steps[0]["attempts"]] == [[429, 500, 200]]
     assert all(s["wall_s"] >= 0 for s in steps)
+
+
+def test_a_call_abandoned_at_the_step_deadline_keeps_its_attempts(geo_sim, tmp_path, retry_waits) -> None:
+    with FakeOpenAI() as fake:
+        fake.push("status", status_code=500, retry_after=0.01).push("hang", times=5, seconds=3.0)
+        run_episode(geo_sim, pilot_for("openai", fake), parse_query("Go to the bedroom", geo_sim.scene),
+                    EpisodeConfig(max_steps=1, step_deadline_s=1.0), spawn="living_room",
+                    recorder=Recorder(tmp_path / "run"))
+    steps = [json.loads(line) for line in (tmp_path / "run" / "episode.jsonl").read_text().splitlines()]
+    first = next(s for s in steps if s.get("step") == 1)
+    (call,) = [[a.get("status") or a.get("error") for a in call] for call in first["attempts"]]
+    assert call[-1] == "abandoned" and set(call[:-1]) <= {500}  # the hung one; the 500 before it, if it came in time

@@ -383,6 +383,10 @@ class ModelPilot(BasePilot):
                                   raw_text=raw, usage=usage)
         return raw, usage
 
+    def abandoned_attempts(self) -> tuple[dict[str, Any], ...]:
+        """The HTTP attempts of the call the controller just abandoned (episode/ask.Deadline records them)."""
+        return self._attempts.abandoned()
+
     def _start_call(self) -> None:
         self._gate.enter()
         self._attempts.begin()

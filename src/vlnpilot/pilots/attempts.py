@@ -27,6 +27,7 @@ class AttemptLog:
     def begin(self) -> None:
         """A new call starts in this thread: forget the attempts of the previous one."""
         self._local.attempts, self._local.sent, self._local.ended = [], None, self.clock()
+        self._latest = self._local.attempts  # for `abandoned`, read from the controller's thread
 
     def on_request(self, request: Any) -> None:
         """httpx `event_hooks["request"]`: an attempt leaves (an unanswered earlier one failed in transport)."""
@@ -53,6 +54,12 @@ class AttemptLog:
         attempts = tuple(self._local.attempts)
         del self._local.attempts
         return attempts
+
+    def abandoned(self) -> tuple[Attempt, ...]:
+        """The attempts so far of the call begun last, from any thread: the controller stopped waiting for it
+        (step deadline); one still unanswered is marked `abandoned`."""
+        return tuple(a if "status" in a or "error" in a else {**a, "error": "abandoned"}
+                     for a in list(getattr(self, "_latest", ())))
 
     def _close_unanswered(self, kind: str) -> None:
         if getattr(self._local, "sent", None) is not None:

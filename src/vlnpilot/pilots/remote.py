@@ -107,6 +107,10 @@ class RemotePilot(BasePilot):
         """Abandon the calls in flight: none of them sends another request (retries included)."""
         self._gate.cancel()
 
+    def abandoned_attempts(self) -> tuple[dict[str, Any], ...]:
+        """The HTTP attempts of the call the controller just abandoned (episode/ask.Deadline records them)."""
+        return self._attempts.abandoned()
+
     def close(self) -> None:
         self.cancel_pending()
         self._client.close()
