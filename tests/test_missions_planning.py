@@ -83,6 +83,7 @@ def test_a_valid_plan_is_flown_end_to_end(geo_sim, tmp_path):
     assert any("Stage 2 (current)" in r.text for r in requests[2:])
     summary, steps = load_run(tmp_path / "run")
     assert summary["mission"]["source"] == "openai" and len(summary["mission"]["planning"]) == 1
+    assert [a["status"] for a in summary["mission"]["planning"][0]["attempts"]] == [200]  # its HTTP attempts
     assert {s["stage"] for s in steps} == {1, 2}
 
 

@@ -27,7 +27,7 @@ from vlnpilot.prompting.render import system_prompt
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.task import parse_query
 
-VOLATILE = {"frames"}  # fields that may differ between a run and its replay
+VOLATILE = {"frames", "wall_s"}  # fields that may differ between a run and its replay (wall_s: timing)
 RESULT_VOLATILE = {"wall_time_s"}
 
 

@@ -46,9 +46,12 @@ class Usage(BaseModel):
     latency_s: float = 0.0
     cost_usd: float = 0.0
     priced: bool = True  # False when the model is missing from the price table (cost then reads 0)
+    # The call's HTTP attempts (pilots/attempts.py), SDK retries included; written in the step's `attempts`, not
+    # in `usage`, so that a usage reads as before.
+    attempts: tuple[dict[str, Any], ...] = Field(default=(), exclude=True)
 
     def __add__(self, other: Usage) -> Usage:
-        sums = {k: getattr(self, k) + getattr(other, k) for k in Usage.model_fields if k != "priced"}
+        sums = {k: getattr(self, k) + getattr(other, k) for k in Usage.model_fields if k not in ("priced", "attempts")}
         return Usage(**sums, priced=self.priced and other.priced)
 
 

@@ -89,16 +89,17 @@ class Deadline:
         finished, answer = call_in_daemon_thread(lambda: ask_once(pilot, pin, state, profile), remaining_s)
         if not finished:
             self._cancel()
-            return self.expired()
+            abandoned = getattr(pilot, "abandoned_attempts", None)  # a model pilot's HTTP attempts so far
+            return self.expired(abandoned() if callable(abandoned) else ())
         return answer
 
     def _cancel(self) -> None:
         if self._pilot is not None:
             self._pilot.cancel_pending()
 
-    def expired(self) -> Answer:
+    def expired(self, attempts: tuple[dict[str, Any], ...] = ()) -> Answer:
         return Answer(None, f"step_deadline: no valid answer within the step deadline of {self.seconds:g} s",
-                      kind="step_deadline")
+                      usage=Usage(attempts=attempts), kind="step_deadline")
 
     def close(self) -> None:
         self._cancel()  # the episode is over: nothing may call the provider for it any more

@@ -18,7 +18,7 @@ hand the step to a person (steps marked `human`) or end the episode `aborted` be
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from vlnpilot.core.commands import HOVER, Command, get_command
@@ -99,18 +99,19 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
         if gate.abort is not None:
             end = _End("aborted", gate.abort)
             break
-        steps = step
+        steps, started = step, time.monotonic()
         answer = asker.ask(step, state, obs, person=gate.pilot)  # observe, ask, validate
         end = _not_to_execute(control, answer)
         if end is not None:  # recorded, never executed
-            _unexecuted(step, state, answer, obs, measures, recording)
+            _unexecuted(step, state, answer, obs, measures, recording, started)
             break
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
         pose_before, (obs, flown, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
         measures.update(StepFacts(tuple(answer.usages), answer.valid, flown, pose_before, obs.pose))
         progress.saw(gt.room() if gt is not None else None)
-        recording.step(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures, config.profile,
-                              None if progress.mission.is_single else progress.stage + 1))
+        recording.step(_timed(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures,
+                                     config.profile, None if progress.mission.is_single else progress.stage + 1),
+                              answer, started))
         asker.flown(step, state, answer, flown or HOVER, verdict.next_state if flown else state, verdict.feedback)
         end = _stopped(halt, obs, answer, asker.failed_streak, config.max_failed_steps)
         if end is None and flown is not None:  # the FSM moves on; a final state ends the stage, judged
@@ -164,11 +165,16 @@ def _start(env: Environment, pilot: BasePilot, task: Mission, config: EpisodeCon
 
 
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
-                recording: EpisodeRecording) -> None:
+                recording: EpisodeRecording, started: float) -> None:
     """A step that ends the episode before anything is executed still costs its calls and is recorded."""
     measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose))
-    recording.step(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
-                              confirmation=answer.confirmation, ranges=answer.ranges))
+    recording.step(_timed(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
+                                     confirmation=answer.confirmation, ranges=answer.ranges), answer, started))
+
+
+def _timed(record: StepRecord, answer: StepAnswer, started: float) -> StepRecord:
+    """The record with its calls (their HTTP attempts) and its wall time since `started` (time.monotonic)."""
+    return replace(record, calls=tuple(answer.usages), wall_s=round(time.monotonic() - started, 4))
 
 
 def _not_to_execute(control: LoopControl, answer: StepAnswer) -> _End | None:

@@ -52,6 +52,8 @@ class StepRecord:
     confirmation: dict[str, Any] | None = None  # the exchange before a final state (confirm_final)
     ranges: tuple[Any, ...] = ()  # the range readings the pilot was told (ranging.RangeReading), before the move
     stage: int | None = None  # the mission's stage (1-based) this step flew, for a mission of several stages
+    calls: tuple[Any, ...] = ()  # the Usage of every pilot call of the step, in order (their HTTP attempts)
+    wall_s: float | None = None  # the step's wall time: asking (re-asks and SDK retries included) and flying
 
     def to_dict(self) -> dict[str, Any]:
         record = {key: value(self) for key, value in ALWAYS_WRITTEN.items()}
@@ -96,6 +98,9 @@ WRITTEN_WHEN_SET: dict[str, Callable[[StepRecord], Any]] = {
     "robot": lambda r: r.obs.info or None,  # a real robot's facts: frame age, battery, safety events
     "ranges": lambda r: {x.direction: x.as_dict() for x in r.ranges} or None,  # --sensors: metres, None beyond
     "stage": lambda r: r.stage,  # a mission of several stages: the stage flown (the report marks boundaries)
+    # per pilot call, its HTTP attempts (pilots/attempts.py): status or error, wait_s, latency_s; SDK retries too
+    "attempts": lambda r: [list(u.attempts) for u in r.calls] if any(u.attempts for u in r.calls) else None,
+    "wall_s": lambda r: r.wall_s,
 }
 FRAMES = "frames"  # added by `EpisodeRecording.step` when the run is recorded: the step's frame files
 

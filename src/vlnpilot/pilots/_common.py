@@ -36,6 +36,7 @@ from vlnpilot.core.decision import (
 from vlnpilot.pilots import pricing
 from vlnpilot.pilots._gate import CallGate
 from vlnpilot.pilots._history import Conversation, Message, messages
+from vlnpilot.pilots.attempts import AttemptLog, event_hooks
 from vlnpilot.pilots.base import BasePilot, PilotError
 from vlnpilot.pilots.options import ModelOptions
 
@@ -313,6 +314,7 @@ class ModelPilot(BasePilot):
         prices = options.prices
         self._prices = pricing.load_prices(prices) if isinstance(prices, Path) else prices
         self._gate = CallGate()  # subclasses hook it into their SDK's HTTP client (see cancel_pending)
+        self._attempts = AttemptLog()  # every HTTP attempt of a call, through the same hooks (`_event_hooks`)
         self.price_known = pricing.find_price(self.model, self._prices) is not None
         if not self.price_known and (self.provider, self.model) not in _UNPRICED_WARNED:
             _UNPRICED_WARNED.add((self.provider, self.model))  # once per model and process, not per pilot
@@ -326,6 +328,10 @@ class ModelPilot(BasePilot):
 
     def __repr__(self) -> str:  # never the key: the SDK client holds it, not us
         return f"{type(self).__name__}(model={self.model!r}, timeout={self.timeout:g})"
+
+    def _event_hooks(self) -> dict[str, list[Callable[[Any], None]]]:
+        """The httpx event hooks a subclass gives its SDK client: the call gate, then the attempt log."""
+        return event_hooks(self._gate.on_request, self._attempts)
 
     def cancel_pending(self) -> None:
         """Abandon the calls in flight: no further HTTP request of theirs (SDK retries included) is sent."""
@@ -342,14 +348,14 @@ class ModelPilot(BasePilot):
     def decide(self, pilot_input: PilotInput) -> Decision:
         earlier = self.conversation.earlier(pilot_input)
         prompt, chat = messages(pilot_input, earlier, jpeg_quality=self.jpeg_quality, max_side=self.max_side)
-        self._gate.enter()
+        self._start_call()
         t0 = time.perf_counter()
         try:
             reply = self._call(prompt, chat)
         except PilotError as exc:
-            raise scrub(exc, self._secret.value) from None
+            raise self._failed(exc) from None
         except Exception as exc:  # an SDK failure our mapping did not foresee: still a PilotError, never a crash
-            raise scrub(self._unexpected(exc), self._secret.value) from None
+            raise self._failed(self._unexpected(exc)) from None
         usage = self._usage(reply, time.perf_counter() - t0)
         decision = self._decision(reply, usage, pilot_input)
         self.conversation.remember(pilot_input, decision.raw_text)
@@ -360,14 +366,14 @@ class ModelPilot(BasePilot):
         (structured output as JSON) and usage. Errors as `decide`'s; a refusal or an empty reply is a PilotError."""
         import json
 
-        self._gate.enter()
+        self._start_call()
         t0 = time.perf_counter()
         try:
             reply = self._call(prompt)
         except PilotError as exc:
-            raise scrub(exc, self._secret.value) from None
+            raise self._failed(exc) from None
         except Exception as exc:  # as in decide: never a crash
-            raise scrub(self._unexpected(exc), self._secret.value) from None
+            raise self._failed(self._unexpected(exc)) from None
         usage = self._usage(reply, time.perf_counter() - t0)
         raw = reply.text if reply.data is None else json.dumps(reply.data, ensure_ascii=False)
         if reply.stop in ("refusal", "content_filter", "truncated") or not (raw or "").strip():
@@ -376,6 +382,20 @@ class ModelPilot(BasePilot):
                                   reason=reply.stop if reply.stop != "stop" else "empty",
                                   raw_text=raw, usage=usage)
         return raw, usage
+
+    def abandoned_attempts(self) -> tuple[dict[str, Any], ...]:
+        """The HTTP attempts of the call the controller just abandoned (episode/ask.Deadline records them)."""
+        return self._attempts.abandoned()
+
+    def _start_call(self) -> None:
+        self._gate.enter()
+        self._attempts.begin()
+
+    def _failed(self, exc: PilotError) -> PilotError:
+        """The call failed: scrubbed of the key, with its HTTP attempts in its usage (as a reply error has)."""
+        usage = getattr(exc, "usage", None) or Usage(priced=self.price_known)
+        exc.usage = usage.model_copy(update={"attempts": self._attempts.end(exc.reason)})  # type: ignore[attr-defined]
+        return scrub(exc, self._secret.value)
 
     def _call(self, prompt: Any, chat: Sequence[Message] | None = None) -> Reply:  # pragma: no cover - abstract
         """Send `chat` (pilots/_history.messages: the earlier turns, then this step's; None: this step's alone)."""
@@ -393,7 +413,8 @@ class ModelPilot(BasePilot):
         cost = pricing.cost_usd(self.model, inp, cached, out, cache_write_tokens=_int(reply.cache_write_tokens),
                                 prices=self._prices)
         return Usage(input_tokens=inp, cached_tokens=min(cached, inp), output_tokens=out,
-                     latency_s=round(latency_s, 4), cost_usd=cost.usd, priced=self.price_known)
+                     latency_s=round(latency_s, 4), cost_usd=cost.usd, priced=self.price_known,
+                     attempts=self._attempts.end())
 
     def _decision(self, reply: Reply, usage: Usage, pilot_input: PilotInput) -> Decision:
         import json

@@ -58,7 +58,7 @@ class AnthropicPilot(ModelPilot):
         self.cache = o.cache
         self.strict_tool = o.strict_tool
         self._secret = Secret(key)
-        http_client = anthropic_sdk.DefaultHttpxClient(event_hooks={"request": [self._gate.on_request]})
+        http_client = anthropic_sdk.DefaultHttpxClient(event_hooks=self._event_hooks())
         self._client = anthropic_sdk.Anthropic(api_key=key, base_url=o.base_url, timeout=self.timeout,
                                                max_retries=self.max_retries, http_client=http_client)
         self.base_url = str(self._client.base_url)

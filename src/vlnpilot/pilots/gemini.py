@@ -134,7 +134,7 @@ class GeminiPilot(ModelPilot):
             base_url=self.base_url,
             timeout=max(1, round(self.timeout * 1000)),  # milliseconds
             retry_options=types.HttpRetryOptions(attempts=1),  # we retry, honouring Retry-After / RetryInfo
-            client_args={"event_hooks": {"request": [self._gate.on_request]}},  # abandoned calls send nothing
+            client_args={"event_hooks": self._event_hooks()},  # abandoned calls send nothing
         )
         self._secret = Secret(key)
         self._client = genai.Client(api_key=key, vertexai=False, http_options=http_options)

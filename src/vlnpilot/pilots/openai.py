@@ -80,7 +80,7 @@ class OpenAIPilot(ModelPilot):
         self._secret = Secret(key)
         self._client = openai_sdk.OpenAI(api_key=key, base_url=self.base_url, timeout=self.timeout,
                                          max_retries=self.max_retries, http_client=openai_sdk.DefaultHttpxClient(
-                                             event_hooks={"request": [self._gate.on_request]}))
+                                             event_hooks=self._event_hooks()))
 
     def __repr__(self) -> str:
         return f"OpenAIPilot(model={self.model!r}, base_url={self.base_url!r}, detail={self.detail!r})"

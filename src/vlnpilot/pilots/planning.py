@@ -137,7 +137,8 @@ def plan_instruction(query: str, scene: Scene, start_room: str | None, pilot: Pi
     feedback = None
     for attempt in range(MAX_REASKS + 1):
         raw, usage, error = _ask(pilot, plan_prompt(query, scene, start_room, feedback))
-        call: dict[str, Any] = {"attempt": attempt, "raw_text": raw, "usage": usage.model_dump()}
+        call: dict[str, Any] = {"attempt": attempt, "raw_text": raw, "usage": usage.model_dump(),
+                                **({"attempts": list(usage.attempts)} if usage.attempts else {})}  # its HTTP attempts
         planning.calls.append(call)
         if error is not None:
             call["error"] = error

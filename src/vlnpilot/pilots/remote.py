@@ -31,6 +31,7 @@ from vlnpilot.pilots._common import (
 )
 from vlnpilot.pilots._gate import CallCancelled, CallGate
 from vlnpilot.pilots._history import Conversation
+from vlnpilot.pilots.attempts import AttemptLog, event_hooks
 from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import ConversationOptions, secret_value
 
@@ -95,8 +96,9 @@ class RemotePilot(BasePilot):
         token = secret_value(o.token) or os.environ.get(TOKEN_ENV) or None
         headers = {"Authorization": f"Bearer {token}"} if token else {}
         self._gate = CallGate()  # abandoned calls send nothing more (see cancel_pending)
+        self._attempts = AttemptLog()  # every HTTP attempt of a call, retries included
         self._client = httpx.Client(base_url=self.url, timeout=self.timeout, headers=headers, transport=o.transport,
-                                    event_hooks={"request": [self._gate.on_request]})
+                                    event_hooks=event_hooks(self._gate.on_request, self._attempts))
 
     def __repr__(self) -> str:
         return f"RemotePilot(url={self.url!r}, model={self.model!r})"
@@ -104,6 +106,10 @@ class RemotePilot(BasePilot):
     def cancel_pending(self) -> None:
         """Abandon the calls in flight: none of them sends another request (retries included)."""
         self._gate.cancel()
+
+    def abandoned_attempts(self) -> tuple[dict[str, Any], ...]:
+        """The HTTP attempts of the call the controller just abandoned (episode/ask.Deadline records them)."""
+        return self._attempts.abandoned()
 
     def close(self) -> None:
         self.cancel_pending()
@@ -157,6 +163,17 @@ class RemotePilot(BasePilot):
     def decide(self, pilot_input: PilotInput) -> Decision:
         payload = self._payload(pilot_input)
         self._gate.enter()
+        self._attempts.begin()
+        try:
+            decision = self._decide(pilot_input, payload)
+        except PilotError as exc:  # with its attempts, as a model pilot's failure
+            usage = getattr(exc, "usage", None) or Usage()
+            exc.usage = usage.model_copy(update={"attempts": self._attempts.end(exc.reason)})  # type: ignore[attr-defined]
+            raise
+        return decision.model_copy(update={"usage": decision.usage.model_copy(update={
+            "attempts": self._attempts.end()})})
+
+    def _decide(self, pilot_input: PilotInput, payload: dict[str, Any]) -> Decision:
         t0 = time.perf_counter()
         try:
             response = call_with_retries(lambda: self._post(payload), classify=self._classify,

@@ -23,7 +23,7 @@ INTERVENTION_KEYS = ("interventions",)
 
 # Recorded keys the page has no place for: shown raw ("other recorded fields"), as are keys the step record
 # does not know (a newer or a foreign writer's).
-SHOWN_RAW = ("override", "confirmation", "human", "robot", "ranges")
+SHOWN_RAW = ("override", "confirmation", "human", "robot", "ranges", "attempts", "wall_s")
 
 
 def known_keys() -> set[str]:
