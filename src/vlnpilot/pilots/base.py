@@ -9,7 +9,7 @@ from typing import Any, Protocol, runtime_checkable
 from vlnpilot.core.decision import NO_TRAITS, Decision, PilotInput, PilotTraits, traits_of
 from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import ConfigError, VLNPilotError
-from vlnpilot.core.extras import needs
+from vlnpilot.core.extras import require
 from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
 
@@ -145,15 +145,24 @@ def check_spec_syntax(spec: str) -> None:
     name, sep, model = str(spec).strip().partition(":")
     if not name.strip():
         raise ConfigError(f"pilot SPEC {spec!r} names no pilot; write NAME or NAME:MODEL, e.g. openai:gpt-4.1")
-    if sep and not model.strip():
+    if sep and not model.strip() and _has_default_model(name.strip().lower()):
         raise ConfigError(f"pilot SPEC {spec!r} has nothing after ':'; write {name.strip()} for its default "
                           f"model, or {name.strip()}:MODEL")
 
 
+def _has_default_model(name: str) -> bool:
+    """Whether NAME alone flies (a default model); a pilot whose SPEC needs its part after ':' (files:DIR,
+    replay:RUN) says itself what it needs. An unknown name is refused later, with the valid names."""
+    try:
+        return pilot_options_class(name).default_model() is not None
+    except VLNPilotError:
+        return True
+
+
 def registration(name: str) -> Registration:
     """The registration of a pilot name (importing only that pilot's module); a bad name lists the known ones."""
-    with needs(*_BUILTIN_EXTRAS.get(name, ()), what=f"the {name} pilot"):  # a missing extra says which
-        return PILOT_REGISTRY.get(name)
+    require(*_BUILTIN_EXTRAS.get(name, ()), what=f"the {name} pilot")  # a missing extra says which, up front
+    return PILOT_REGISTRY.get(name)
 
 
 def pilot_factory(name: str) -> PilotFactory:
