@@ -12,7 +12,7 @@ STAMP := $(VENV)/.installed
 demo: sysdeps $(STAMP)
 	$(VENV)/bin/vln-pilot run "Go to the bathroom" --spawn living_room
 
-test: sysdeps testdeps $(STAMP) lint
+test: sysdeps testdeps $(STAMP) lint typecheck
 	$(PY) -m pytest -q
 	$(VENV)/bin/mkdocs build --strict --quiet --site-dir $(VENV)/site   # a broken link or anchor fails
 

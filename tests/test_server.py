@@ -101,6 +101,16 @@ def test_request_may_pick_an_allowed_pilot(client, factory):
     assert "allowed: openai, gemini:gemini-2.5-flash" in response.json()["detail"]
 
 
+def test_plan_route_serves_only_allowed_pilots(client, factory):
+    """/v1/plan checks the allow-list as /v1/decide does, and no `pilot` means the server's own."""
+    plan = {"system": "plan", "context": "Go to the kitchen", "schema": {"type": "object"}}
+    response = client.post("/v1/plan", json={**plan, "pilot": "stdin"})
+    assert response.status_code == 403 and response.json()["reason"] == "pilot_not_allowed"
+    assert "stdin" not in factory.pilots  # never built
+    client.post("/v1/plan", json=plan)
+    assert list(factory.pilots) == ["openai"]
+
+
 @pytest.mark.parametrize("auth", [None, "Bearer wrong-token", "Basic abc", f"Bearer {TOKEN}x"])
 def test_401_without_or_with_a_wrong_token(client, auth):
     headers = {"Authorization": auth} if auth else {}

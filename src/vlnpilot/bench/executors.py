@@ -28,7 +28,10 @@ import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol, cast
+
+if TYPE_CHECKING:
+    from multiprocessing.context import ForkContext, ForkServerContext, SpawnContext
 
 from vlnpilot.bench.episode_job import EpisodeSpec, Event, SimulatorCache, import_plugins, run_guarded
 from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
@@ -212,7 +215,8 @@ class LocalExecutor:
     def run(self, specs: Sequence[EpisodeSpec]) -> Iterator[Event]:
         if not specs:
             return
-        ctx = mp.get_context(self.start_method)
+        # typeshed gives `Process` only to the concrete contexts, and get_context(str) the base class's type
+        ctx = cast("SpawnContext | ForkServerContext | ForkContext", mp.get_context(self.start_method))
         plan = split_workers(min(self.workers, len(specs)), default_workers())
         tasks, events = ctx.Queue(), ctx.Queue()
         for spec in specs:
@@ -225,7 +229,7 @@ class LocalExecutor:
             p.start()
         pending = {s.key for s in specs}
         running: dict[str, set[str]] = {}  # worker name -> keys it started and has not reported yet
-        reaped: set[int] = set()
+        reaped: set[int | None] = set()
         try:
             while pending:
                 try:

@@ -42,7 +42,7 @@ from vlnpilot.tasks.task import Task
 __all__ = ["run_episode"]
 
 
-def _attach_ground_truth(env: Environment, pilot: Pilot) -> GroundTruth | None:
+def _attach_ground_truth(env: Environment, pilot: BasePilot) -> GroundTruth | None:
     gt = ground_truth_of(env)  # only if the environment declares it (a real drone does not)
     if pilot.traits.privileged:
         if gt is None:

@@ -94,7 +94,14 @@ class Mean:
         return (sum(float(r[self.field]) for r in results) / len(results)) if results else 0.0
 
 
-Aggregate = Total | Mean
+class Aggregate(Protocol):
+    """What a bench computes over a pilot's episodes into `PilotSummary.<name>` (Total, Mean, StageRate)."""
+
+    @property
+    def name(self) -> str: ...
+    @property
+    def type(self) -> type: ...
+    def over(self, results: Sequence[Result]) -> int | float: ...
 
 LAST = 1000  # the rank of a column that names none: after every other column
 
@@ -353,13 +360,16 @@ class MissionStages:
     (1-based; None after a success), the step each later stage began at, and each stage's shortest path.
     A one-stage mission is today's episode: 1 stage, reached iff it succeeded."""
 
-    fields = (ResultField("stages", int, 1), ResultField("stages_reached", int | None, None),
-              ResultField("failed_stage", int | None, None), ResultField("stage_starts", list | None, None),
-              ResultField("stage_paths_m", list | None, None))
-    aggregates = (Total("stages", absent=1), StageRate("isr"), StageRate("csr"), StageRate("cgt"))
-    columns = tuple(replace(column(name, md=name.upper(), tex=name.upper(), fmt=".3f", csv_fmt=".4f",
-                                   rank=rank), when=_when_missions)
-                    for name, rank in (("isr", 42), ("csr", 44), ("cgt", 46)))
+    fields: ClassVar[tuple[ResultField, ...]] = (
+        ResultField("stages", int, 1), ResultField("stages_reached", int | None, None),
+        ResultField("failed_stage", int | None, None), ResultField("stage_starts", list | None, None),
+        ResultField("stage_paths_m", list | None, None))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("stages", absent=1), StageRate("isr"), StageRate("csr"),
+                                                   StageRate("cgt"))
+    columns: ClassVar[tuple[Column, ...]] = tuple(
+        replace(column(name, md=name.upper(), tex=name.upper(), fmt=".3f", csv_fmt=".4f", rank=rank),
+                when=_when_missions)
+        for name, rank in (("isr", 42), ("csr", 44), ("cgt", 46)))
 
     def reset(self, start: EpisodeStart) -> None:
         self.mission = as_mission(start.task)

@@ -17,10 +17,11 @@ from vlnpilot.episode.loop import run_episode
 from vlnpilot.episode.measures import EpisodeResult
 from vlnpilot.episode.record import StepCallback
 from vlnpilot.pilots.base import Pilot, close_pilot
+from vlnpilot.tasks.mission import Mission
 from vlnpilot.tasks.task import Task
 
 
-def run_recorded_episode(env: Environment, pilot: Pilot, task: Task, config: EpisodeConfig, *,
+def run_recorded_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: EpisodeConfig, *,
                          run_dir: str | Path, spawn: str | None = None, pilot_spec: str | None = None,
                          save_frames: bool = True, overwrite: bool = False, on_step: StepCallback | None = None,
                          judge_outcome: JudgeOutcome | None = None,

@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, Literal, TypedDict, TypeVar
 
 from vlnpilot.core.decision import (
     DECISION_ERROR_CODES,
@@ -220,7 +220,7 @@ def status_error(provider: str, status: int, message: str, *, key_env: str, mode
         return PilotError(f"the {provider} API refused access ({status}): the key in {key_env} may lack access to "
                           f"model {model!r}, or the region is not served{suffix}", fatal=True, reason="permission")
     named = model is not None and (model.lower() in low or "model_not_found" in low)  # not another parameter
-    if status in (400, 404, 410) and named and _MODEL_GONE.search(low):
+    if status in (400, 404, 410) and model is not None and named and _MODEL_GONE.search(low):
         return PilotError(f"the {provider} API says model {model!r} is unknown or retired ({status}); "
                           f"{current_models_hint(provider, model)}", fatal=True, reason="model_unavailable")
     if status == 404:
@@ -278,6 +278,15 @@ class Reply:
     cache_write_tokens: int = 0
 
 
+class TokenCounts(TypedDict, total=False):
+    """A provider's token counts, as the keywords of `Reply` they become."""
+
+    input_tokens: int
+    cached_tokens: int
+    output_tokens: int
+    cache_write_tokens: int
+
+
 def _int(value: Any) -> int:
     try:
         return max(0, int(value or 0))
@@ -292,8 +301,8 @@ class ModelPilot(BasePilot):
     on transport/HTTP failures (after the SDK's or our retries).
     """
 
-    name: ClassVar[str]
-    provider: ClassVar[str]
+    model: str  # always named: the options give each provider's default
+    provider: str  # a class attribute; the OpenAI pilot names an OpenAI-compatible server per instance
     key_envs: ClassVar[tuple[str, ...]]
     _secret: Secret = Secret(None)  # subclasses keep their key here (the SDK client holds it too)
 
@@ -376,7 +385,7 @@ class ModelPilot(BasePilot):
             raise self._failed(self._unexpected(exc)) from None
         usage = self._usage(reply, time.perf_counter() - t0)
         raw = reply.text if reply.data is None else json.dumps(reply.data, ensure_ascii=False)
-        if reply.stop in ("refusal", "content_filter", "truncated") or not (raw or "").strip():
+        if reply.stop in ("refusal", "content_filter", "truncated") or raw is None or not raw.strip():
             raise PilotReplyError(f"the {self.provider} model {self.model!r} gave no usable answer "
                                   f"({reply.stop}: {reply.stop_detail or 'no content'})",
                                   reason=reply.stop if reply.stop != "stop" else "empty",

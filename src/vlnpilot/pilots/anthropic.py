@@ -17,7 +17,7 @@ from typing import Any
 
 import anthropic as anthropic_sdk
 
-from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, resolve_api_key
+from vlnpilot.pilots._common import ModelPilot, Reply, Secret, TokenCounts, map_stainless_error, resolve_api_key
 from vlnpilot.pilots._history import Message, Part, single
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import ModelOptions, secret_value
@@ -116,7 +116,7 @@ def _reply(message: Any) -> Reply:
     fresh = getattr(usage, "input_tokens", 0) or 0
     read = getattr(usage, "cache_read_input_tokens", 0) or 0
     written = getattr(usage, "cache_creation_input_tokens", 0) or 0
-    counts = {"input_tokens": fresh + read + written, "cached_tokens": read, "cache_write_tokens": written,
+    counts: TokenCounts = {"input_tokens": fresh + read + written, "cached_tokens": read, "cache_write_tokens": written,
               "output_tokens": getattr(usage, "output_tokens", 0) or 0}
     blocks = getattr(message, "content", None) or []
     tool = next((b for b in blocks if getattr(b, "type", None) == "tool_use"), None)

@@ -28,8 +28,11 @@ class Pilot(Protocol):
     """Anything that turns a PilotInput into a Decision. The least a pilot is; `BasePilot` adds its traits and
     the hooks the episode calls, as no-ops (a pilot written to this bare protocol is adapted by `as_base_pilot`)."""
 
-    name: str
-    model: str | None
+    @property
+    def name(self) -> str: ...  # read-only here, so that a pilot may narrow them (a model pilot always has a model)
+
+    @property
+    def model(self) -> str | None: ...
 
     def decide(self, pilot_input: PilotInput) -> Decision: ...
 

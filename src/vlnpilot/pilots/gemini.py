@@ -29,6 +29,7 @@ from vlnpilot.pilots._common import (
     ModelPilot,
     Reply,
     Secret,
+    TokenCounts,
     call_with_retries,
     connection_error,
     error_message_and_code,
@@ -222,7 +223,7 @@ def _name(value: Any) -> str:
 
 def _reply(response: Any) -> Reply:
     um = getattr(response, "usage_metadata", None)
-    counts = {
+    counts: TokenCounts = {
         "input_tokens": getattr(um, "prompt_token_count", 0) or 0,
         "cached_tokens": getattr(um, "cached_content_token_count", 0) or 0,
         # thinking tokens are billed as output

@@ -100,7 +100,7 @@ class NoisyOraclePilot(OraclePilot):
         rng, lo, hi = self._rng, *self.offset_m
         offsets: dict[str, float] = {}
         strict: set[str] = set()
-        for door in sorted(self._gt.scene.open_doors(), key=lambda d: d.id):  # fixed order: reproducible draws
+        for door in sorted(self._truth.scene.open_doors(), key=lambda d: d.id):  # fixed order: reproducible draws
             u_off, mag, side, u_strict = rng.random(), rng.uniform(lo, hi), rng.random(), rng.random()
             if u_off < self.p_offset:
                 offsets[door.id] = mag if side < 0.5 else -mag
@@ -117,7 +117,7 @@ class NoisyOraclePilot(OraclePilot):
     # -- the policy ----------------------------------------------------------------------------------------------------
     def decide(self, pilot_input: PilotInput) -> Decision:
         if self._gt is not None and (self._task is None or self._task.query != pilot_input.query):
-            self._task = parse_query(pilot_input.query, self._gt.scene)
+            self._task = parse_query(pilot_input.query, self._truth.scene)
         if self._plan is None and self._gt is not None:
             self._plan = self._draw_plan()
         if self.heed_feedback and self._current_key is not None:
@@ -145,7 +145,7 @@ class NoisyOraclePilot(OraclePilot):
         return key in (self._plan or {}).get("strict", set()) and key not in self._relaxed
 
     def _policy(self, state: State, pose: Pose, allowed: tuple[str, ...]) -> tuple[str, State, str]:
-        S, task = State, self._task
+        S, task = State, self._goal
         plan = self._plan or {}
         if task.goal_target is not None and state in (S.SEARCH_OBJECT, S.REACH_OBJECT):
             self._current_key = OBJECT_KEY
@@ -155,7 +155,7 @@ class NoisyOraclePilot(OraclePilot):
                 rot = "B1" if "B1" in allowed else allowed[0]
                 return rot, S.STAY_ON_ROOM, "This looks like the room I was asked to reach."
             if task.goal_target is not None and state in (S.SEARCH_OBJECT, S.REACH_OBJECT):
-                dist, _ = self._gt.target_distance_bearing(task.goal_target)
+                dist, _ = self._truth.target_distance_bearing(task.goal_target)
                 if dist <= self.early_distance_m:
                     if state is S.SEARCH_OBJECT:
                         move, _, _ = super()._policy(state, pose, allowed)
@@ -163,7 +163,7 @@ class NoisyOraclePilot(OraclePilot):
                     self._early_done = True
                     return "E", S.DESCRIBE_OBJECT, f"The {task.goal_target} is in front of me."
         if state is S.REACH_OBJECT and self._strict(OBJECT_KEY):
-            _, err = self._gt.target_distance_bearing(task.goal_target)
+            _, err = self._truth.target_distance_bearing(self._target())
             if abs(err) > self.strict_deg:
                 return ("C1" if err > 0 else "B1"), S.REACH_OBJECT, "Centring the object precisely."
         return super()._policy(state, pose, allowed)

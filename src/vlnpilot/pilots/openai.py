@@ -21,7 +21,7 @@ from urllib.parse import urlsplit
 
 import openai as openai_sdk
 
-from vlnpilot.pilots._common import ModelPilot, Reply, Secret, map_stainless_error, redact, resolve_api_key
+from vlnpilot.pilots._common import ModelPilot, Reply, Secret, TokenCounts, map_stainless_error, redact, resolve_api_key
 from vlnpilot.pilots._history import Message, Part, single
 from vlnpilot.pilots.base import PilotError, register_pilot
 from vlnpilot.pilots.options import ModelOptions, secret_value
@@ -155,7 +155,7 @@ def is_official(base_url: str | None) -> bool:
 def _reply(response: Any) -> Reply:
     usage = getattr(response, "usage", None)
     details = getattr(usage, "prompt_tokens_details", None)
-    counts = {
+    counts: TokenCounts = {
         "input_tokens": getattr(usage, "prompt_tokens", 0) or 0,
         "cached_tokens": getattr(details, "cached_tokens", 0) or 0,
         "output_tokens": getattr(usage, "completion_tokens", 0) or 0,

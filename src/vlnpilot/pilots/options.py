@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, ClassVar, Literal
+from typing import Any, ClassVar, Literal, Self
 
 from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, ValidationInfo, field_validator
 
@@ -48,7 +48,7 @@ class PilotOptions(BaseModel):
         return {f.alias or name for name, f in cls.model_fields.items() if _is_secret(f.annotation)}
 
     @classmethod
-    def build(cls, pilot: str, /, **values: Any) -> PilotOptions:
+    def build(cls, pilot: str, /, **values: Any) -> Self:
         """Validated options of the pilot named `pilot` (a missing or None `model` keeps the class's default)."""
         if values.get("model") is None:
             values.pop("model", None)

@@ -15,7 +15,7 @@ from typing import Any, ClassVar
 from pydantic import Field
 
 from vlnpilot.core.commands import COMMANDS, Kind
-from vlnpilot.core.decision import Decision, PilotInput, PilotTraits
+from vlnpilot.core.decision import Decision, DoorPosition, PilotInput, PilotTraits
 from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.fsm import State, state_spec
@@ -87,25 +87,46 @@ class OraclePilot(BasePilot):
         self._avoid: tuple[str, ...] = ()  # rooms the mission never enters
         self._stage = 0  # the mission's stage the oracle flies
         self._waypoint: tuple[float, float] | None = None  # a free point to fly to first (missions)
-        self._centred: set[str] = set()  # rooms whose spawn point this stage has flown to
+        self._centred: set[str | None] = set()  # rooms whose spawn point this stage has flown to
         self._room: str | None = None
 
     def attach(self, ground_truth: GroundTruth) -> None:
         self._gt, self._task, self._room = ground_truth, None, None
 
+    @property
+    def _truth(self) -> GroundTruth:
+        if self._gt is None:
+            raise VLNPilotError("the oracle needs ground truth: call attach(ground_truth) first")
+        return self._gt
+
+    @property
+    def _goal(self) -> Task:
+        if self._task is None:
+            raise VLNPilotError("the oracle has no task yet: decide() reads it from the step")
+        return self._task
+
+    def _target(self) -> str:
+        """The id of the object the current task goes to (only asked in the object states)."""
+        target = self._goal.goal_target
+        if target is None:
+            raise VLNPilotError("the oracle's task has no object to reach")
+        return target
+
     # -- geometry helpers ----------------------------------------------------------------------------
     def _next_door(self, room: str, goal: str) -> tuple[Door, tuple[float, float]] | None:
         """The door to cross next on the way to `goal`, and its normal pointing away from `room`."""
-        scene = self._gt.scene
+        scene = self._truth.scene
         if room == goal:
             return None
         path = route(scene, room, goal, self._avoid)
+        if path is None:
+            raise VLNPilotError(f"the oracle finds no route from {room} to {goal}")
         door = scene.doors_between(path[0], path[1])[0]
         nx, ny = door.normal
         return (door, (nx, ny)) if door.rooms[0] == room else (door, (-nx, -ny))
 
     def _viewing_point(self) -> tuple[float, float]:
-        t = self._gt.scene.target(self._task.goal_target)
+        t = self._truth.scene.target(self._target())
         a = math.radians(t.facing_deg)
         return t.position[0] + self.view_m * math.cos(a), t.position[1] + self.view_m * math.sin(a)
 
@@ -127,8 +148,8 @@ class OraclePilot(BasePilot):
         if self._gt is None:
             raise VLNPilotError("the oracle needs ground truth: call attach(ground_truth) first")
         self._task = self._current_task(pilot_input)
-        pose = self._gt.pose()
-        self._room = self._gt.room() or self._room
+        pose = self._truth.pose()
+        self._room = self._truth.room() or self._room
         state = pilot_input.state
         if pilot_input.mission is not None:
             self._mission_waypoint(pilot_input, state)
@@ -146,11 +167,11 @@ class OraclePilot(BasePilot):
             return Mission.from_dict(mission).task(pilot_input.stage)
         if self._task is None or self._task.query != pilot_input.query:
             self._avoid = ()
-            return parse_query(pilot_input.query, self._gt.scene)
+            return parse_query(pilot_input.query, self._truth.scene)
         return self._task
 
     def _policy(self, state: State, pose: Pose, allowed: tuple[str, ...]) -> tuple[str, State, str]:
-        task, room = self._task, self._room
+        task, room = self._goal, self._room
         nd = self._next_door(room, task.goal_room) if room else None
         S = State
         if state is S.RECOGNIZE_ROOM:
@@ -165,6 +186,7 @@ class OraclePilot(BasePilot):
             px, py = self._approach_point(*nd)
             return self._goto(pose, px, py, allowed), S.SEARCH_OPEN_DOOR, f"In the {room}; looking for {nd[0].id}."
         if state is S.SEARCH_OPEN_DOOR:
+            nd = self._door_needed(nd, state)
             px, py = self._approach_point(*nd)
             err = _bearing(pose, px, py)
             near = math.hypot(px - pose.x, py - pose.y) < 0.08
@@ -176,7 +198,7 @@ class OraclePilot(BasePilot):
             ahead = "A1" if near else self._goto(pose, px, py, allowed)  # never turn back to a point just passed
             return (rot or ahead), S.ORIENTED_TOWARDS_DOOR, "Open door found ahead."
         if state is S.ORIENTED_TOWARDS_DOOR:
-            return self._orient(pose, *nd, allowed)
+            return self._orient(pose, *self._door_needed(nd, state), allowed)
         if state is S.GO_THROUGH_DOOR:
             depth = self._door_depth(pose)
             nxt = S.POSITION_IN_CENTER if depth + 0.1 >= self.cross_m else S.GO_THROUGH_DOOR
@@ -192,7 +214,7 @@ class OraclePilot(BasePilot):
             vx, vy = self._viewing_point()
             if math.hypot(vx - pose.x, vy - pose.y) > 0.12:
                 return self._goto(pose, vx, vy, allowed), S.SEARCH_OBJECT, "Searching the object."
-            t = self._gt.scene.target(task.goal_target)
+            t = self._truth.scene.target(self._target())
             err = _bearing(pose, t.position[0], t.position[1])
             rot = _rotation(err, allowed) if abs(err) > ALIGN_DEG else None
             if rot is None:
@@ -200,7 +222,7 @@ class OraclePilot(BasePilot):
             done = abs(err - _signed(rot)) <= ALIGN_DEG
             return rot, (S.REACH_OBJECT if done else S.SEARCH_OBJECT), f"Turning towards the {t.name}."
         if state is S.REACH_OBJECT:
-            dist, err = self._gt.target_distance_bearing(task.goal_target)
+            dist, err = self._truth.target_distance_bearing(self._target())
             if abs(err) > ALIGN_DEG and (rot := _rotation(err, allowed)):
                 return rot, S.REACH_OBJECT, "Centring the object."
             if dist > self.success.object_distance_m - 0.1:
@@ -210,12 +232,18 @@ class OraclePilot(BasePilot):
             return "E", S.FINAL, "Done."
         raise VLNPilotError(f"the oracle has no policy for state {state.value}")
 
+    def _door_needed(self, nd: tuple[Door, tuple[float, float]] | None, state: State
+                     ) -> tuple[Door, tuple[float, float]]:
+        if nd is None:
+            raise VLNPilotError(f"the oracle is in the goal room {self._room}, with no door to find in {state.value}")
+        return nd
+
     def _mission_waypoint(self, pilot_input: PilotInput, state: State) -> None:
         """In a mission, Recognize Room first flies to the room's spawn point when a stage starts away from its
         goal (it starts wherever the last one ended: in front of an object, beside a door leaf; the oracle's
         straight lines are proven from the spawn points), and 0.8 m straight on when an object's room is entered
         (a turn at once may graze the door leaf just passed). One-stage episodes fly exactly as before."""
-        task = self._task
+        task = self._goal
         if pilot_input.stage != self._stage:
             self._stage, self._centred = pilot_input.stage, set()
             if task.goal_room != self._room:
@@ -224,18 +252,18 @@ class OraclePilot(BasePilot):
         entering = task.goal_target is not None and self._room == task.goal_room and pilot_input.step > 1
         if state is State.RECOGNIZE_ROOM and entering and self._room not in self._centred:
             self._centred.add(self._room)  # straight on, away from the door leaf just passed
-            self._waypoint = self._ahead(self._gt.pose(), 0.8)
+            self._waypoint = self._ahead(self._truth.pose(), 0.8)
 
     def _ahead(self, pose: Pose, metres: float) -> tuple[float, float] | None:
         """The point `metres` straight ahead, if it is still in this room."""
         c, sn = pose.heading()
         x, y = pose.x + metres * c, pose.y + metres * sn
-        return (x, y) if self._gt.scene.room_at(x, y) == self._room else None
+        return (x, y) if self._truth.scene.room_at(x, y) == self._room else None
 
     def _room_spawn(self) -> tuple[float, float] | None:
         """The room's spawn point: free space from which every route of the room is flown (a stage that ended
         in front of an object or beside a door leaf would cut a corner on its way to the next door)."""
-        spawn = next((s for s in self._gt.scene.spawns if s.room == self._room), None)
+        spawn = next((s for s in self._truth.scene.spawns if s.room == self._room), None)
         return None if spawn is None else (spawn.pose.x, spawn.pose.y)
 
     def _approach_point(self, door: Door, normal: tuple[float, float]) -> tuple[float, float]:
@@ -243,7 +271,7 @@ class OraclePilot(BasePilot):
 
     def _door_depth(self, pose: Pose) -> float:
         """Signed distance past the plane of the door being crossed (the nearest open door)."""
-        door = min(self._gt.scene.open_doors(), key=lambda d: math.dist(d.center, (pose.x, pose.y)))
+        door = min(self._truth.scene.open_doors(), key=lambda d: math.dist(d.center, (pose.x, pose.y)))
         depth, _ = door.frame_of(pose.x, pose.y)
         heading_along = math.cos(math.radians(pose.yaw_deg - door.normal_deg))
         return depth if heading_along >= 0 else -depth
@@ -273,8 +301,8 @@ class OraclePilot(BasePilot):
             return rot, S.SEARCH_OPEN_DOOR, "The doorway is to my side; turning to face it."
         return rot, S.ORIENTED_TOWARDS_DOOR, "Facing the doorway."
 
-    def _door_position(self, pose: Pose) -> str:
-        room, task = self._room, self._task
+    def _door_position(self, pose: Pose) -> DoorPosition:
+        room, task = self._room, self._goal
         nd = self._next_door(room, task.goal_room) if room else None
         if nd is None:
             return "not_visible"

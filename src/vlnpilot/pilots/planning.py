@@ -19,7 +19,7 @@ import json
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from string import Template
-from typing import Any
+from typing import Any, TypeGuard
 
 from vlnpilot.core.decision import Usage
 from vlnpilot.core.errors import VLNPilotError
@@ -72,9 +72,17 @@ def plan_prompt(query: str, scene: Scene, start_room: str | None, feedback: str 
                   schema=plan_schema(scene))
 
 
-def can_plan(pilot: Pilot | None) -> bool:
+def can_plan(pilot: Pilot | None) -> TypeGuard[Pilot]:
     """Whether this pilot answers the planning call (else the deterministic parser plans)."""
     return pilot is not None and (callable(getattr(pilot, "plan", None)) or callable(getattr(pilot, "complete", None)))
+
+
+def planning_call(pilot: Pilot) -> Callable[[Prompt], tuple[str, Usage]]:
+    """The call that plans: the pilot's own `plan`, else its `complete` (a pilot `can_plan` accepts has one)."""
+    ask: Callable[[Prompt], tuple[str, Usage]] | None = getattr(pilot, "plan", None) or getattr(pilot, "complete", None)
+    if ask is None:
+        raise PlanError(f"pilot {pilot.name!r} does not plan")
+    return ask
 
 
 @dataclass
@@ -166,7 +174,7 @@ def _plain(query: str, scene: Scene, start_room: str | None) -> bool:
 
 def _ask(pilot: Any, prompt: Prompt) -> tuple[str, Usage, str | None]:
     """One planning call: (the answer's text, its usage, an error or None)."""
-    ask = getattr(pilot, "plan", None) or pilot.complete
+    ask = planning_call(pilot)
     try:
         raw, usage = ask(prompt)
     except PilotError as exc:

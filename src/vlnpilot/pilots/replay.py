@@ -51,8 +51,11 @@ class ReplayPilot(BasePilot):
         strict, row = o.strict, o.row
         self.run_dir = _recording(Path(source), row)
         self.strict = strict
+        steps: list[dict[str, Any]] = []
+        self.summary: dict[str, Any] = {}
+        self.trial: dict[str, Any] = {}
         if self.run_dir is None:  # a set of trials without a row: the bench checks the spec once this way
-            self.run_dir, self.summary, self.trial, steps = Path(source), {}, {}, []
+            self.run_dir = Path(source)
         else:
             self.summary, steps = load_run(self.run_dir)
             self.trial = load_trial(self.run_dir)
@@ -92,7 +95,7 @@ class ReplayPilot(BasePilot):
         calls: list[dict[str, Any]] = list(rec.get("failures") or [])
         if rec.get("confirmation"):
             calls.append({**rec["confirmation"], "confirm": True})
-        out: list[dict[str, Any] | None] = sorted(calls, key=lambda c: int(c.get("attempt", 0)))
+        out: list[dict[str, Any] | None] = [*sorted(calls, key=lambda c: int(c.get("attempt", 0)))]
         if rec.get("decision") is not None:
             out.append(None)
         return out

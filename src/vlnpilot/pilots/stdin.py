@@ -61,10 +61,11 @@ class StdinPilot(BasePilot):
         self._input, self._output = o.input, o.output
         self.jpeg_quality = o.jpeg_quality
         self.show_system = o.show_system
-        image_dir = o.image_dir
+        image_dir: str | Path | None = o.image_dir
+        self._remove_images: weakref.finalize | None = None
         if image_dir is None:  # ours: removed when the pilot is closed, collected, or the process exits
             image_dir = tempfile.mkdtemp(prefix="vlnpilot-stdin-")
-            self.close = weakref.finalize(self, shutil.rmtree, image_dir, ignore_errors=True)
+            self._remove_images = weakref.finalize(self, shutil.rmtree, image_dir, ignore_errors=True)
         self.image_dir = Path(image_dir)
         try:
             self.image_dir.mkdir(parents=True, exist_ok=True)
@@ -73,6 +74,10 @@ class StdinPilot(BasePilot):
         self._last_step: int | None = None
         self._episode = 0
         self._attempt = 0
+
+    def close(self) -> None:
+        if self._remove_images is not None:
+            self._remove_images()
 
     # Streams are looked up at call time, so that a redirected sys.stdin/sys.stderr (pytest, CliRunner) is used.
     @property

@@ -145,7 +145,7 @@ def _entry(ep: Episode, entry: Entry, plan: Any | None) -> dict[str, Any]:
         "stage_start": _stage_start(ep, entry),
     }
     at = plan.positions[entry.index] if plan is not None else None
-    if at is not None:
+    if plan is not None and at is not None:
         x, y = at
         view["plan"] = {"x": f"{100 * x / plan.size[0]:.3f}", "y": f"{100 * y / plan.size[1]:.3f}",
                         "yaw": f"{float(pose.get('yaw_deg', 0.0)):.1f}"}

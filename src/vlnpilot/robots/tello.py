@@ -20,7 +20,7 @@ import threading
 import time
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 
@@ -262,14 +262,15 @@ class TelloEnv:
         pulse = {Kind.FORWARD: cal.forward_10cm, Kind.LATERAL_LEFT: cal.left_10cm,
                  Kind.LATERAL_RIGHT: cal.right_10cm}[cmd.kind]
         lr = {Kind.LATERAL_LEFT: -pulse.speed, Kind.LATERAL_RIGHT: pulse.speed}.get(cmd.kind, 0)
-        self.link.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
+        self._connected.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
         self._confirm_link(f"the rc pulse of {cmd.code}")
         self._pose = cmd.motion().apply(self._pose)
 
     # -- the link ---------------------------------------------------------------------------------------------
     def _confirm_link(self, what: str) -> dict[str, Any]:
         """A state packet that arrived after `what`; none within 1.5 s means the link is dead: land, end."""
-        state = None if self.link.lost.is_set() else self.link.fresh_state()
+        link = self._connected
+        state = None if link.lost.is_set() else link.fresh_state()
         if state is None:
             if self.watchdog is not None:
                 self.watchdog.declare_lost(f"{what} and no state packet after it")
@@ -280,7 +281,7 @@ class TelloEnv:
         if self.link is not None and self.link.lost.is_set():
             self._link_lost(executed, obs)
 
-    def _link_lost(self, executed: bool, obs: Observation | None = None) -> None:
+    def _link_lost(self, executed: bool, obs: Observation | None = None) -> NoReturn:
         self.flying = self.awaiting_operator = False  # the watchdog lands it; nothing else is sent
         raise LinkLost(f"the link to the Tello is lost ({self._lost_reason()}): 'land' sent, nothing more is "
                        "executed", obs or self._observe(time.monotonic(), executed), landed=True, executed=executed)
@@ -296,12 +297,13 @@ class TelloEnv:
         self._pose = Pose(self._pose.x, self._pose.y, z, yaw)
 
     def _observe(self, settled_at: float, executed: bool = True) -> Observation:
-        image, timing = self.link.fresh_frame(settled_at)
-        state = self.link.state()
+        link = self._connected
+        image, timing = link.fresh_frame(settled_at)
+        state = link.state()
         with self._event_lock:
             events, self._unreported = self._unreported, []
         info = {**timing, "battery_pct": state.get("bat"), "tof_cm": state.get("tof"),
-                "keepalives": self.link.keepalives, "events": events}
+                "keepalives": link.keepalives, "events": events}
         return Observation(front_rgb=image, rear_rgb=NO_REAR, pose=self._pose, collided=None, step=self._step,
                            info=info, executed=executed)
 

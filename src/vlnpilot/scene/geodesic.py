@@ -70,7 +70,8 @@ def _astar(blocked: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -
         dx, dy = abs(ci - gi), abs(cj - gj)
         return max(dx, dy) + diag * min(dx, dy)
 
-    cost, parent = {s: 0.0}, {}
+    cost: dict[int, float] = {s: 0.0}
+    parent: dict[int, int] = {}
     frontier = [(h(s), 0.0, s)]  # ties go to the deeper cell: far fewer expansions in open rooms
     while frontier:
         _, _, c = heapq.heappop(frontier)

@@ -23,7 +23,7 @@ import ipaddress
 import logging
 import os
 from collections.abc import AsyncIterator, Callable, Collection, Iterator
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
 from fastapi import Depends, FastAPI, Request
@@ -66,8 +66,12 @@ def _tiny_jpeg_b64() -> str:
     return base64.b64encode(buf.getvalue()).decode("ascii")
 
 
-AskedState = Literal[tuple(s.value for s in ASKED_STATES)]  # type: ignore[valid-type]
-CommandCode = Literal[tuple(COMMANDS)]  # type: ignore[valid-type]
+if TYPE_CHECKING:  # built from the FSM's and the command table's values at run time; plain strings to mypy
+    AskedState = str
+    CommandCode = str
+else:
+    AskedState = Literal[tuple(s.value for s in ASKED_STATES)]
+    CommandCode = Literal[tuple(COMMANDS)]
 Profile = Literal[PROFILES]  # type: ignore[valid-type]
 
 
@@ -390,7 +394,7 @@ def create_app(
                 pilot_input = _pilot_input(req, images.decode(header))
             return _ask(get_pilot(spec), pilot_input, req.pilot or pilot_spec)
 
-    _add_plan_route(app, get_pilot, auth)
+    _add_plan_route(app, lambda requested: get_pilot(allowed_spec(requested)), auth)
     return app
 
 
@@ -405,8 +409,9 @@ def _ask(pilot: Pilot, pilot_input: PilotInput, spec: str) -> DecideResponse:
     except Exception as exc:
         log.exception("pilot %r crashed", spec)
         raise ApiError(502, f"the pilot crashed ({type(exc).__name__})", "pilot_crashed") from None
-    return DecideResponse(**decision.core(), usage=decision.usage, model=decision.model or pilot.model,
-                          raw_text=decision.raw_text)
+    return DecideResponse(room=decision.room, movement=decision.movement, state=decision.state,
+                          description=decision.description, door_position=decision.door_position,
+                          usage=decision.usage, model=decision.model or pilot.model, raw_text=decision.raw_text)
 
 
 def _add_plan_route(app: FastAPI, get_pilot: Callable[[str | None], Pilot], auth: list[Any]) -> None:
@@ -420,7 +425,7 @@ def _add_plan_route(app: FastAPI, get_pilot: Callable[[str | None], Pilot], auth
 
 
 def _plan(pilot: Pilot, req: PlanRequest) -> PlanResponse:
-    from vlnpilot.pilots.planning import can_plan
+    from vlnpilot.pilots.planning import can_plan, planning_call
     from vlnpilot.prompting.render import Prompt
 
     if not can_plan(pilot):
@@ -428,9 +433,8 @@ def _plan(pilot: Pilot, req: PlanRequest) -> PlanResponse:
                        "cannot_plan", fatal=True)
     prompt = Prompt(system=req.system, context=req.context, state_prompt="", step_text=req.step_text,
                     image_jpeg=b"", schema=req.json_schema)
-    ask = getattr(pilot, "plan", None) or pilot.complete
     try:
-        raw, usage = ask(prompt)
+        raw, usage = planning_call(pilot)(prompt)
     except PilotError as exc:
         raise _pilot_error(exc) from None
     except VLNPilotError as exc:
@@ -460,12 +464,13 @@ def _document_allowed_pilots(app: FastAPI, allowed: list[str]) -> None:
     generate = app.openapi
 
     def openapi() -> dict[str, Any]:
-        if app.openapi_schema is None:
-            schema = generate()
-            for option in schema["components"]["schemas"]["DecideRequest"]["properties"]["pilot"].get("anyOf", []):
-                if option.get("type") == "string":
-                    option["enum"] = list(allowed)
-        return app.openapi_schema
+        if app.openapi_schema is not None:
+            return app.openapi_schema
+        schema = generate()  # FastAPI keeps it as app.openapi_schema
+        for option in schema["components"]["schemas"]["DecideRequest"]["properties"]["pilot"].get("anyOf", []):
+            if option.get("type") == "string":
+                option["enum"] = list(allowed)
+        return schema
 
     app.openapi = openapi  # type: ignore[method-assign]
 

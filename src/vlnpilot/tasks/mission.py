@@ -202,20 +202,22 @@ def validate_mission(mission: Mission, scene: Scene, start_room: str | None) -> 
     for i, s in enumerate(mission.stages, 1):
         if s.kind not in STAGE_KINDS:
             raise PlanError(f"stage {i} has an unknown kind {s.kind!r}; kinds: {', '.join(STAGE_KINDS)}")
-        if s.kind == "object" and s.target not in targets:
-            raise PlanError(f"stage {i}: there is no object {s.target!r} in this house; {offers(scene)}")
-        if s.kind == "object" and s.room is not None and targets[s.target] != s.room:
-            raise PlanError(f"stage {i}: the {s.target} is in the {targets[s.target]}, not in the {s.room}; "
-                            f"{offers(scene)}")
+        if s.kind == "object":
+            if s.target is None or s.target not in targets:
+                raise PlanError(f"stage {i}: there is no object {s.target!r} in this house; {offers(scene)}")
+            if s.room is not None and targets[s.target] != s.room:
+                raise PlanError(f"stage {i}: the {s.target} is in the {targets[s.target]}, not in the {s.room}; "
+                                f"{offers(scene)}")
         if s.kind != "return" and s.kind != "object" and s.room not in rooms:
             raise PlanError(f"stage {i}: there is no room {s.room!r} on the map; {offers(scene)}")
         if s.kind == "return" and s.room is not None and s.room not in rooms:
             raise PlanError(f"stage {i}: there is no room {s.room!r} on the map; {offers(scene)}")
-    stages = tuple(replace(s, room=targets[s.target]) if s.kind == "object" else s for s in mission.stages)
+    stages = tuple(replace(s, room=targets[s.target]) if s.kind == "object" and s.target is not None else s
+                   for s in mission.stages)  # every object stage has its target: checked above
     resolved = replace(mission, stages=stages).resolved(start_room)
     here = start_room
     for i, s in enumerate(resolved.stages, 1):
-        if here is not None and route(scene, here, s.room, resolved.avoid) is None:
+        if here is not None and (s.room is None or route(scene, here, s.room, resolved.avoid) is None):
             why = f" without entering {', '.join(resolved.avoid)}" if resolved.avoid else ""
             raise PlanError(f"stage {i} ({s.room}) cannot be reached from {here}{why}; {offers(scene)}")
         here = s.room

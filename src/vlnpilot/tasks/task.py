@@ -139,8 +139,8 @@ def shortest_path_points(scene: Scene, start: Pose, task: Task, config: SuccessC
     if task.goal_target is not None:
         t = scene.target(task.goal_target)
         d = config.object_distance_m - 0.2
-        a = math.radians(t.facing_deg)
-        pts.append((t.position[0] + d * math.cos(a), t.position[1] + d * math.sin(a)))
+        facing = math.radians(t.facing_deg)
+        pts.append((t.position[0] + d * math.cos(facing), t.position[1] + d * math.sin(facing)))
     return pts
 
 
