@@ -104,7 +104,10 @@ class Secret:
     __str__ = __repr__
 
 
-def scrub(exc: BaseException, *secrets: str | None) -> BaseException:
+_E = TypeVar("_E", bound=BaseException)
+
+
+def scrub(exc: _E, *secrets: str | None) -> _E:
     """Remove secrets from an exception's message in place (a provider may echo the key back)."""
     if exc.args and any(s and len(s) >= 4 and s in str(a) for s in secrets for a in exc.args):
         exc.args = tuple(redact(a, *secrets) if isinstance(a, str) else a for a in exc.args)
