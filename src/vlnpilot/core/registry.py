@@ -32,6 +32,7 @@ class Registry(Generic[T]):
         self.group = group
         self._builtins = dict(builtins or {})
         self._entries: dict[str, T] = {}
+        self._points: list[EntryPoint] | None = None  # the group's entry points, once read
 
     def register(self, name: str) -> Callable[[T], T]:
         """Decorator: `@registry.register("NAME")` over a class or a factory; the last registration wins."""
@@ -103,7 +104,11 @@ class Registry(Generic[T]):
             self._entries[ep.name] = obj
 
     def _entry_points(self) -> list[EntryPoint]:
-        return list(entry_points(group=self.group)) if self.group else []
+        """The group's entry points, read once: scanning the installed distributions costs milliseconds, and
+        `in SCENES` runs at every scene load."""
+        if self._points is None:
+            self._points = list(entry_points(group=self.group)) if self.group else []
+        return self._points
 
 
 def _is_module(obj: object) -> bool:
