@@ -157,6 +157,9 @@ class PilotAsker:
         self._stage = index
         self.context.goal_target = self._mission.task(index).goal_target
 
+    def _stages_left(self) -> int:
+        return len(self._mission.stages) - 1 - self._stage
+
     def ask(self, step: int, state: State, obs: Observation, person: Pilot | None = None) -> StepAnswer:
         """Ask until a valid decision, a fatal or transient failure, or `max_reasks` rejected answers."""
         config, out = self.config, StepAnswer()
@@ -182,7 +185,7 @@ class PilotAsker:
             if decision is not None and needs_confirmation(config.context_config, decision, out.confirmation):
                 # A final state ends the episode for good: ask once more, with a warning (costs a call, not a step).
                 out.confirmation = {"attempt": attempt - 1, "first": decision.core(), "raw_text": decision.raw_text}
-                feedback = [*self.notes, confirmation_note(parse_state(decision.state))]
+                feedback = [*self.notes, confirmation_note(parse_state(decision.state), self._stages_left())]
                 continue
             if answer.error is None:
                 out.decision = decision

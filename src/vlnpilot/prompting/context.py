@@ -23,7 +23,7 @@ from vlnpilot.core.fsm import State
 from vlnpilot.core.ranging import RangeReading, RangeSensor, readings_text
 from vlnpilot.tasks.success import longer_move_rule, range_meaning, range_rule
 
-CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends the episode and cannot be undone. "
+CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends {what} and cannot be undone. "
                 "Look at the image again. Answer '{state}' again only if the image really shows it{why}; "
                 "otherwise choose another state and movement.")
 _CONFIRM_WHY = {
@@ -178,8 +178,11 @@ class PilotContext:
 _OBJECT_STATES = (State.SEARCH_OBJECT, State.REACH_OBJECT)
 
 
-def confirmation_note(state: State) -> str:
-    return CONFIRM_NOTE.format(state=state.value, why=_CONFIRM_WHY.get(state, ""))
+def confirmation_note(state: State, stages_left: int = 0) -> str:
+    """The warning before a final state; in a mission with stages left it ends the stage, not the episode (pilots
+    reported "ends the episode" contradicting the mission plan's next stage)."""
+    what = "the episode" if stages_left == 0 else "this stage (if it is judged a success, the next stage starts)"
+    return CONFIRM_NOTE.format(state=state.value, what=what, why=_CONFIRM_WHY.get(state, ""))
 
 
 def _short(text: str, limit: int = 140) -> str:
