@@ -18,9 +18,9 @@ from vlnpilot.core.fsm import FINAL_STATES, State, parse_state, state_spec
 from vlnpilot.core.records import Pose
 from vlnpilot.episode.config import OUTCOMES, EpisodeConfig
 from vlnpilot.episode.loop import run_episode
-from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots.base import PilotError, make_pilot
 from vlnpilot.pilots.oracle import OraclePilot
+from vlnpilot.pilots.transport import TRANSIENT_REASONS
 from vlnpilot.scene.model import Spawn
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.task import parse_query

@@ -5,9 +5,9 @@ from __future__ import annotations
 import pytest
 
 from fakes import FakeAnthropic, sample_input
-from vlnpilot.pilots._common import Reply
 from vlnpilot.pilots.anthropic import TOOL_NAME, AnthropicPilot, _reply
 from vlnpilot.pilots.base import PilotError, make_pilot
+from vlnpilot.pilots.model import Reply
 from vlnpilot.pilots.pricing import cost_usd
 
 KEY = "sk-ant-test-0123456789"

@@ -10,17 +10,12 @@ import pytest
 
 from vlnpilot.core.decision import DecisionError, parse_decision
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.pilots import _common
-from vlnpilot.pilots._common import (
-    Secret,
-    call_with_retries,
-    parse_retry_after,
-    redact,
-    resolve_api_key,
-    status_error,
-)
+from vlnpilot.pilots import model as model_module
+from vlnpilot.pilots import transport
 from vlnpilot.pilots.base import PilotError, known_pilots
 from vlnpilot.pilots.pricing import DEFAULT_PRICES, PRICES_AS_OF, Price, cost_usd, find_price, load_prices
+from vlnpilot.pilots.secrets import redact, resolve_api_key
+from vlnpilot.pilots.transport import call_with_retries, parse_retry_after, status_error
 
 
 def test_model_pilots_are_registered():
@@ -149,7 +144,15 @@ def test_redaction():
     assert "AIzaSyA1234567890123456789012" not in redact("key=AIzaSyA1234567890123456789012")
     assert "my-plain-secret" not in redact("echo my-plain-secret", "my-plain-secret")
     assert "Bearer ***" in redact("Authorization: Bearer abcdefghijkl")
-    assert repr(Secret("hunter22")) == "Secret('***')" and "hunter22" not in str(Secret("hunter22"))
+
+
+def test_a_model_pilot_keeps_its_key_out_of_its_repr_and_attributes():
+    from vlnpilot.pilots.openai import OpenAIPilot
+
+    pilot = OpenAIPilot(api_key="sk-hunter22secret", base_url="http://127.0.0.1:9/v1")
+    shown = repr(pilot) + str(pilot) + repr(vars(pilot)) + str(pilot._secret)
+    assert "hunter22" not in shown and pilot._secret.get_secret_value() == "sk-hunter22secret"
+    pilot.close()
 
 
 def test_resolve_api_key(monkeypatch):
@@ -175,8 +178,8 @@ def test_resolve_api_key(monkeypatch):
 def test_decision_error_codes(text, code):
     with pytest.raises(DecisionError) as info:
         parse_decision(text)
-    assert info.value.code == code and code in _common.REPLY_REASONS  # the pilot raises it as its reason
+    assert info.value.code == code and code in model_module.REPLY_REASONS  # the pilot raises it as its reason
 
 
 def test_reply_reasons_are_distinct_from_transient_ones():
-    assert not (_common.REPLY_REASONS & _common.TRANSIENT_REASONS)
+    assert not (model_module.REPLY_REASONS & transport.TRANSIENT_REASONS)

@@ -11,8 +11,8 @@ import pytest
 from fakes import FakeAnthropic, FakeGemini, FakeOpenAI, ServerThread, sample_image, sample_input
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fsm import State
-from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import make_pilot
+from vlnpilot.pilots.model import PilotReplyError
 from vlnpilot.server import create_app
 
 KEY = "secret-test-key-0123456789"

@@ -15,8 +15,8 @@ from PIL import Image
 from fakes import FakeAnthropic, FakeGemini, FakeOpenAI, free_port, sample_input
 from vlnpilot.core.decision import Decision
 from vlnpilot.core.fsm import State, state_spec
-from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import PilotError, make_pilot
+from vlnpilot.pilots.model import PilotReplyError
 from vlnpilot.prompting.render import decision_schema
 
 KEY = "secret-test-key-0123456789"  # not shaped like a real key: only the pilot's own scrubbing can hide it

@@ -11,8 +11,8 @@ from fakes import ScriptedPilot, ServerThread, free_port, sample_input
 from vlnpilot.core.decision import Usage
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fsm import State
-from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import PilotError, make_pilot
+from vlnpilot.pilots.model import PilotReplyError
 from vlnpilot.pilots.remote import RemotePilot
 from vlnpilot.server import create_app
 

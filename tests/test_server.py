@@ -16,8 +16,8 @@ from schemathesis.specs.openapi.checks import positive_data_acceptance
 from fakes import FakeOpenAI, ScriptedPilot, sample_image
 from fakes.scripted import INSTANCES
 from vlnpilot.core.decision import Usage
-from vlnpilot.pilots._common import PilotReplyError
 from vlnpilot.pilots.base import PilotError
+from vlnpilot.pilots.model import PilotReplyError
 from vlnpilot.server import create_app
 from vlnpilot.server.app import IMAGE_PATTERN, decode_image
 

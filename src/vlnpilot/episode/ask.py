@@ -28,9 +28,9 @@ from vlnpilot.core.environment import RangeSensing
 from vlnpilot.core.fsm import FINAL_STATES, State, parse_state, state_spec
 from vlnpilot.core.ranging import RangeReading, RangeSensor
 from vlnpilot.core.records import Observation
-from vlnpilot.pilots._common import TRANSIENT_REASONS
 from vlnpilot.pilots._gate import call_in_daemon_thread
 from vlnpilot.pilots.base import Pilot, PilotError, as_base_pilot
+from vlnpilot.pilots.transport import TRANSIENT_REASONS
 from vlnpilot.prompting.context import ContextConfig, PilotContext, confirmation_note
 from vlnpilot.safety import draw_corridor
 from vlnpilot.tasks.mission import Mission, as_mission

@@ -16,11 +16,14 @@ from collections.abc import Sequence
 from typing import Any
 
 import anthropic as anthropic_sdk
+from pydantic import SecretStr
 
-from vlnpilot.pilots._common import ModelPilot, Reply, Secret, TokenCounts, map_stainless_error, resolve_api_key
 from vlnpilot.pilots._history import Message, Part, single
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.model import ModelPilot, Reply, TokenCounts
 from vlnpilot.pilots.options import ModelOptions, secret_value
+from vlnpilot.pilots.secrets import resolve_api_key
+from vlnpilot.pilots.transport import map_stainless_error
 
 log = logging.getLogger(__name__)
 
@@ -57,7 +60,7 @@ class AnthropicPilot(ModelPilot):
         key = resolve_api_key(secret_value(o.api_key), self.key_envs, "Anthropic")
         self.cache = o.cache
         self.strict_tool = o.strict_tool
-        self._secret = Secret(key)
+        self._secret = SecretStr(key or "")
         http_client = anthropic_sdk.DefaultHttpxClient(event_hooks=self._event_hooks())
         self._client = anthropic_sdk.Anthropic(api_key=key, base_url=o.base_url, timeout=self.timeout,
                                                max_retries=self.max_retries, http_client=http_client)

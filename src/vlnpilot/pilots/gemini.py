@@ -21,27 +21,25 @@ from typing import Any, Literal
 from google import genai
 from google.genai import errors as genai_errors
 from google.genai import types
+from pydantic import SecretStr
 
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.pilots._common import (
+from vlnpilot.pilots._history import Message, single
+from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.model import ModelPilot, Reply, TokenCounts
+from vlnpilot.pilots.options import ModelOptions, secret_value
+from vlnpilot.pilots.secrets import resolve_api_key
+from vlnpilot.pilots.transport import (
     HTTPX_TIMEOUTS,
     HTTPX_TRANSPORT_ERRORS,
-    ModelPilot,
-    Reply,
-    Secret,
-    TokenCounts,
     call_with_retries,
     connection_error,
     error_message_and_code,
     is_retryable_status,
     parse_retry_after,
-    resolve_api_key,
     status_error,
     timeout_error,
 )
-from vlnpilot.pilots._history import Message, single
-from vlnpilot.pilots.base import PilotError, register_pilot
-from vlnpilot.pilots.options import ModelOptions, secret_value
 
 log = logging.getLogger(__name__)
 
@@ -137,7 +135,7 @@ class GeminiPilot(ModelPilot):
             retry_options=types.HttpRetryOptions(attempts=1),  # we retry, honouring Retry-After / RetryInfo
             client_args={"event_hooks": self._event_hooks()},  # abandoned calls send nothing
         )
-        self._secret = Secret(key)
+        self._secret = SecretStr(key or "")
         self._client = genai.Client(api_key=key, vertexai=False, http_options=http_options)
 
     def __repr__(self) -> str:

@@ -20,11 +20,14 @@ from typing import Any, Literal
 from urllib.parse import urlsplit
 
 import openai as openai_sdk
+from pydantic import SecretStr
 
-from vlnpilot.pilots._common import ModelPilot, Reply, Secret, TokenCounts, map_stainless_error, redact, resolve_api_key
 from vlnpilot.pilots._history import Message, Part, single
 from vlnpilot.pilots.base import PilotError, register_pilot
+from vlnpilot.pilots.model import ModelPilot, Reply, TokenCounts
 from vlnpilot.pilots.options import ModelOptions, secret_value
+from vlnpilot.pilots.secrets import redact, resolve_api_key
+from vlnpilot.pilots.transport import map_stainless_error
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +80,7 @@ class OpenAIPilot(ModelPilot):
         self._format = "json_schema" if o.response_format == "auto" else o.response_format
         self.max_tokens_param = o.max_tokens_param or ("max_completion_tokens" if official else "max_tokens")
         self.extra_body = dict(o.extra_body or {})
-        self._secret = Secret(key)
+        self._secret = SecretStr(key or "")
         self._client = openai_sdk.OpenAI(api_key=key, base_url=self.base_url, timeout=self.timeout,
                                          max_retries=self.max_retries, http_client=openai_sdk.DefaultHttpxClient(
                                              event_hooks=self._event_hooks()))

@@ -143,7 +143,7 @@ class ConversationOptions(PilotOptions):
 
 
 class ModelOptions(ConversationOptions):
-    """What every SDK pilot (`pilots._common.ModelPilot`) takes; each provider's class adds its own and its model."""
+    """What every SDK pilot (`pilots.model.ModelPilot`) takes; each provider's class adds its own and its model."""
 
     model: str
     api_key: SecretStr | None = Field(None, repr=False)  # default: the provider's environment variable

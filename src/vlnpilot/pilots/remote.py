@@ -18,22 +18,21 @@ from pydantic import Field, SecretStr
 
 from vlnpilot.core.decision import Decision, EarlierTurn, PilotInput, PilotTraits, Usage
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.pilots._common import (
-    REPLY_REASONS,
-    PilotReplyError,
-    call_with_retries,
-    connection_error,
-    is_retryable_status,
-    parse_retry_after,
-    redact,
-    status_error,
-    timeout_error,
-)
 from vlnpilot.pilots._gate import CallCancelled, CallGate
 from vlnpilot.pilots._history import Conversation
 from vlnpilot.pilots.attempts import AttemptLog, event_hooks
 from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
+from vlnpilot.pilots.model import REPLY_REASONS, PilotReplyError
 from vlnpilot.pilots.options import ConversationOptions, secret_value
+from vlnpilot.pilots.secrets import redact
+from vlnpilot.pilots.transport import (
+    call_with_retries,
+    connection_error,
+    is_retryable_status,
+    parse_retry_after,
+    status_error,
+    timeout_error,
+)
 
 URL_ENV = "VLN_PILOT_URL"
 TOKEN_ENV = "VLN_PILOT_TOKEN"

@@ -37,9 +37,10 @@ from vlnpilot.core.commands import COMMANDS, get_command
 from vlnpilot.core.decision import DecisionFields, EarlierTurn, PilotInput, Usage
 from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
 from vlnpilot.core.fsm import ASKED_STATES, PROFILES, parse_state
-from vlnpilot.pilots._common import TRANSIENT_REASONS, redact
 from vlnpilot.pilots.base import Pilot, PilotError, make_pilot
 from vlnpilot.pilots.options import MAX_HISTORY
+from vlnpilot.pilots.secrets import redact
+from vlnpilot.pilots.transport import TRANSIENT_REASONS
 from vlnpilot.server import images
 from vlnpilot.server.images import (
     IMAGE_MIN_LENGTH,
