@@ -28,9 +28,10 @@ CONFIRM_NOTE = ("Confirmation: you chose the final state '{state}', which ends {
                 "otherwise choose another state and movement.")
 _CONFIRM_WHY = {
     State.STAY_ON_ROOM: " (the drone is inside the goal room, not in or just before a doorway)",
-    State.DESCRIBE_OBJECT: " (what the monitor checks: the middle of the whole object is straight ahead, not "
-                           "a part of it; and it passes Reach Object's stop rule again, no floor in front of it "
-                           "and as wide as its kind must look)",
+    # The stop rule by name, not restated: with a range sensor it is stated in range terms (a pilot reported the
+    # width wording here contradicting it).
+    State.DESCRIBE_OBJECT: " (the object is straight ahead and visible, and it passes Reach Object's stop rule, "
+                           "as that prompt stated it, again)",
 }
 
 
