@@ -40,14 +40,16 @@ import yaml
 from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
 from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.fsm import PROFILES
+from vlnpilot.prompting.context import CONTEXT_PRESETS
+from vlnpilot.safety.config import SHIELDS
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
 from vlnpilot.tasks.mission import Mission, PlanError, as_mission
 from vlnpilot.tasks.mission_parser import plan_mission
 from vlnpilot.tasks.task import Task, parse_query
 
-_TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "spawn_jitter",
-             "spawn_labels", "rows")
+_TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "context", "shield",
+             "spawn_jitter", "spawn_labels", "rows")
 # a row's own scene overrides the suite's (house suites); a row's `sensors` (none, tof, multiranger:
 # vlnpilot.core.ranging) the bench's --sensors; plan / refuse: what a mission suite expects
 _ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "plan", "refuse")
@@ -110,6 +112,10 @@ class Suite:
     max_steps: int = 50
     seed: int = 0
     profile: str = "paper"
+    # What the suite pins, so that its table means one thing (the paper suite: the paper's context and no shield);
+    # None: the bench's --context / --shield, or their defaults. An explicit option still overrides a pin.
+    context: str | None = None
+    shield: str | None = None
     spawn_jitter_m: float = 0.0
     spawn_jitter_deg: float = 0.0
     spawn_labels: dict[str, str] = field(default_factory=dict)
@@ -142,7 +148,8 @@ class Suite:
         """The whole suite as plain data (YAML-able; `suite_from_dict` reads it back)."""
         return {"name": self.name, "description": self.description, "scene": self.scene,
                 "repetitions": self.repetitions, "max_steps": self.max_steps, "seed": self.seed,
-                "profile": self.profile, "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
+                "profile": self.profile, **{k: v for k, v in (("context", self.context), ("shield", self.shield)) if v},
+                "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
                 "spawn_labels": dict(self.spawn_labels),
                 "rows": [{"id": r.id, "spawn": r.spawn, "query": r.query,
                           "goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})},
@@ -160,6 +167,17 @@ def episode_seed(base: int, row_id: str, rep: int) -> int:
     """
     digest = hashlib.sha256(f"{int(base)}/{row_id}/{int(rep)}".encode()).digest()
     return int.from_bytes(digest[:4], "big") & 0x7FFFFFFF
+
+
+def _pin(data: dict[str, Any], key: str, valid: Iterable[str], errors: list[str]) -> str | None:
+    """A suite's pinned context or shield (None when it pins none); an unknown name is an error naming the valid."""
+    value = data.get(key)
+    if value is None:
+        return None
+    if str(value) not in valid:
+        errors.append(f"unknown {key} {value!r}; valid: {', '.join(valid)}")
+        return None
+    return str(value)
 
 
 def load_suite(suite: str | Path) -> Suite:
@@ -223,6 +241,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     profile = str(data.get("profile", "paper"))
     if profile not in PROFILES:
         errors.append(f"unknown profile {profile!r}; valid profiles: {', '.join(PROFILES)}")
+    context, shield = _pin(data, "context", CONTEXT_PRESETS, errors), _pin(data, "shield", SHIELDS, errors)
     jitter = data.get("spawn_jitter") or {}
     jm = jd = 0.0
     if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
@@ -264,7 +283,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     if errors:
         raise SuiteError(f"suite {source} is invalid:\n  - " + "\n  - ".join(errors))
     return Suite(name=str(data.get("name") or default_name), rows=tuple(rows), scene=scene.name, repetitions=reps,
-                 max_steps=max_steps, seed=seed, profile=profile, spawn_jitter_m=jm, spawn_jitter_deg=jd,
+                 max_steps=max_steps, seed=seed, profile=profile, context=context, shield=shield, spawn_jitter_m=jm, spawn_jitter_deg=jd,
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
                  description=str(data.get("description") or ""), source=source, refused=tuple(refused))
 

@@ -128,6 +128,7 @@ class PilotContext:
         self._in_state = Travel()
         self._moves: tuple[str, ...] = ()  # the executed commands of the current state, oldest first
         self._since_door: Travel | None = None  # None until the first Go Through Door
+        self._state = State.RECOGNIZE_ROOM  # the state the next step is asked in
         self._memory: deque[str] = deque(maxlen=config.memory)
 
     def update(self, step: int, state: State, decision: Any, executed: Command, next_state: State) -> None:
@@ -136,6 +137,7 @@ class PilotContext:
         self._moves += (executed.code,)
         if self._since_door is not None:
             self._since_door = self._since_door.add(executed)
+        self._state = next_state
         if next_state is not state:
             self._in_state, self._moves = Travel(), ()
             if next_state is State.GO_THROUGH_DOOR:  # the crossing began with this step's move
@@ -146,8 +148,13 @@ class PilotContext:
                                 f"{next_state.value}; room {decision.room}; you saw: {_short(decision.description)}")
 
     def in_state(self) -> str:
-        """The line every context gets on the current state (`PilotInput.in_state`)."""
-        return in_state_text(self._moves, self._in_state)
+        """The line every context gets on the current state (`PilotInput.in_state`). In Go Through Door it adds the
+        crossing so far, which began with the move that entered the state: the one number its rule counts (pilots
+        reported two origins, "flown in this state" and "since the crossing began", one move apart)."""
+        text = in_state_text(self._moves, self._in_state)
+        if self._state is State.GO_THROUGH_DOOR and self._since_door is not None:
+            text += f" The crossing so far, the move that entered this state included: forward {self._since_door.forward_m:.2f} m."
+        return text
 
     def lines(self, step: int, state: State | None = None, readings: tuple[RangeReading, ...] = ()) -> tuple[str, ...]:
         """The context lines of this step's prompt (empty for the paper context)."""
