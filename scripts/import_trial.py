@@ -60,6 +60,8 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         "git_sha": summary["provenance"]["git_sha"],
         "context": (summary["config"].get("context") or {}).get("preset", "paper"),
         "shield": summary["config"]["shield"],
+        "profile": summary["config"]["profile"],
+        "sensors": (summary.get("capabilities") or {}).get("range_sensor") or "none",
         "outcome": summary["result"]["outcome"],
         "steps": summary["result"]["steps"],
     }
@@ -73,7 +75,7 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
 def write_suite(set_dir: Path) -> Path:
     """One suite row per trial of the set (one repetition each), with the set's common settings."""
     trials = sorted(p for p in set_dir.iterdir() if (p / "trial.json").is_file())
-    rows, limits, profiles = [], set(), set()
+    rows, limits, profiles, pins = [], set(), set(), set()
     for path in trials:
         summary, _ = load_run(path)
         trial = json.loads((path / "trial.json").read_text())
@@ -83,16 +85,18 @@ def write_suite(set_dir: Path) -> Path:
                      "scene": trial["scene"]})
         limits.add(summary["config"]["max_steps"])
         profiles.add(summary["config"]["profile"])
-    if len(limits) != 1 or len(profiles) != 1:
-        raise SystemExit(f"{set_dir}: a set of trials shares one step limit and profile; "
-                         f"found {sorted(limits)}, {sorted(profiles)}")
+        pins.add((trial.get("context") or "paper", trial.get("shield") or "off"))
+    if len(limits) != 1 or len(profiles) != 1 or len(pins) != 1:
+        raise SystemExit(f"{set_dir}: a set of trials shares one step limit, profile, context and shield; "
+                         f"found {sorted(limits)}, {sorted(profiles)}, {sorted(pins)}")
+    context, shield = pins.pop()
     scene = rows[0]["scene"]
     for row in rows:  # a row names its scene only where it differs from the set's (houses)
         if row["scene"] == scene:
             del row["scene"]
     suite = {"name": set_dir.name, "description": f"Replays the real-VLM trials of {set_dir.name}, one row each.",
              "scene": scene, "repetitions": 1, "max_steps": limits.pop(), "seed": 0,
-             "profile": profiles.pop(), "rows": rows}
+             "profile": profiles.pop(), "context": context, "shield": shield, "rows": rows}  # pinned: replays as flown
     path = set_dir / "suite.yaml"
     path.write_text(yaml.safe_dump(suite, sort_keys=False, allow_unicode=True))
     return path

@@ -217,9 +217,10 @@ def test_stdin_pilot_through_the_cli(tmp_path: Path) -> None:
     answer = json.dumps({"room": "bedroom", "movement": "C1", "state": "Stay on Room",
                          "description": "A bed and a wardrobe.", "door_position": "not_visible"})
     result = CliRunner().invoke(cli.app, ["run", "Go to the bedroom", "--spawn", "bedroom", "--pilot", "stdin",
-                                          "--out", str(tmp_path / "r")], input=answer + "\n")
+                                          "--out", str(tmp_path / "r")], input=answer + "\n" + answer + "\n")
     assert result.exit_code == 0, result.output
     assert "success in 1 steps" in result.stdout
+    assert "Confirmation: you chose the final state 'Stay on Room'" in result.stderr  # the default context: plus
     assert "image: " in result.stderr and "## Current FSM state\nRecognize Room" in result.stderr
 
 

@@ -120,8 +120,9 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         shield: Annotated[str | None, typer.Option(
             "--shield", help="off, geometry, depth or assist (default: geometry; with a Tello: assist).")] = None,
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
-        context: Annotated[str, typer.Option("--context", help="Pilot context: paper (the paper's five inputs) "
-                                             "or plus (odometry, budget, memory, confirmation).")] = "paper",
+        context: Annotated[str | None, typer.Option("--context", help="Pilot context: paper (the paper's five "
+                                                    "inputs) or plus (odometry, budget, memory, confirmation; the "
+                                                    "default, measured best: docs/pilot-memory.md).")] = None,
         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a run already in --out.")] = False,
         sensors: SensorsOpt = "none",
         robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator) or tello.")] = "sim",
@@ -145,6 +146,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.core.rundir import claim_run_dir, default_run_dir
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
+    from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
@@ -161,7 +163,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
     config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
-                           context=context)
+                           context=context or DEFAULT_CONTEXT)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
@@ -382,10 +384,11 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           profile: Annotated[str | None, typer.Option("--profile", help=PROFILE_HELP)] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           pilot_option: PilotOptionOpt = None,
-          shield: Annotated[str | None, typer.Option("--shield", help="off, geometry or depth (default: geometry).")]
-          = None,
+          shield: Annotated[str | None, typer.Option("--shield", help="off, geometry or depth (default: the "
+                                                     "suite's pin, else geometry).")] = None,
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
-          context: Annotated[str, typer.Option("--context", help="Pilot context: paper or plus.")] = "paper",
+          context: Annotated[str | None, typer.Option("--context", help="Pilot context: paper or plus (default: the "
+                                                      "suite's pin, else plus).")] = None,
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
           sensors: SensorsOpt = "none",
           plugin: Annotated[list[str] | None, typer.Option(
@@ -398,14 +401,14 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     from vlnpilot.bench.results import RESULTS, ResultsLog
     from vlnpilot.core.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.options import parse_option_pairs
+    from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.safety import DEFAULT_SHIELD
 
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
-    if context != "paper":
-        options["context"] = context
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
-                              profile=profile, base_url=check_base_url(base_url), shield=shield or DEFAULT_SHIELD,
+                              profile=profile, base_url=check_base_url(base_url), shield=shield,
+                              context=context, default_shield=DEFAULT_SHIELD, default_context=DEFAULT_CONTEXT,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
                               plugins=tuple(plugin or ()), sensors=sensors)
     if report:

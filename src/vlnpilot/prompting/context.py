@@ -63,6 +63,11 @@ CONTEXT_PRESETS: dict[str, ContextConfig] = {
 }
 
 
+# What `vln-pilot run` and `bench` use when neither the option nor a suite names one: the context the trials measured
+# best, with a stateless pilot too (docs/pilot-memory.md). The library's EpisodeConfig keeps "paper", the paper's.
+DEFAULT_CONTEXT = "plus"
+
+
 def context_preset(name: str | ContextConfig) -> ContextConfig:
     """A preset by name (`paper`, `plus`), or a ContextConfig as is."""
     if isinstance(name, ContextConfig):
