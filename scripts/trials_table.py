@@ -66,13 +66,19 @@ def summary_table(sets: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def _base_row(row: str) -> str:
+    """A trial's row without its repetition number (`living-bathroom-2` -> `living-bathroom`)."""
+    return row.rsplit("-", 1)[0] if row[-1].isdigit() and "-" in row else row
+
+
 def row_table(sets: dict[str, list[dict]]) -> str:
-    """Successes per paper-suite row and set (the rows of the paper's Table 4; the houses are not its rows)."""
-    names = sorted((n for n in sets if not n.startswith("houses")), key=_order)
+    """Successes per paper-suite row and set (the rows of the paper's Table 4, flown in the cabin, one goal each)."""
+    names = sorted((n for n in sets if not n.startswith("missions")
+                    and all(t["scene"].startswith("cabin") for t in sets[n])), key=_order)
     per: dict[str, dict[str, list[str]]] = defaultdict(lambda: defaultdict(list))
     for name in names:
         for t in sets[name]:
-            per[t["row"].rsplit("-", 1)[0] if t["row"][-1].isdigit() else t["row"]][name].append(t["outcome"])
+            per[_base_row(t["row"])][name].append(t["outcome"])
     lines = ["| row | " + " | ".join(LABELS.get(n, n) for n in names) + " |", "|---|" + "---|" * len(names)]
     for row in sorted(per):
         cells = []
@@ -80,6 +86,29 @@ def row_table(sets: dict[str, list[dict]]) -> str:
             got = per[row][name]
             cells.append(f"{got.count('success')}/{len(got)}" if got else "")
         lines.append(f"| {row} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+MEMORY_COLUMNS = (("paper", "conversation"), ("paper", "none"), ("plus", "conversation"), ("plus", "none"))
+
+
+def memory_table(sets: dict[str, list[dict]]) -> str:
+    """The rows flown by stateless pilots, beside the same rows flown by pilots with memory (issue 28): successes,
+    episodes and mean steps per context and pilot memory, over every set and prompt version."""
+    every = [t for trials in sets.values() for t in trials if t.get("sensors", "none") == "none"]
+    cells: dict[tuple[str, str], dict[tuple[str, str], list[dict]]] = defaultdict(lambda: defaultdict(list))
+    for t in every:
+        cells[(t["scene"], _base_row(t["row"]))][(t["context"], t["pilot_memory"])].append(t)
+    rows = sorted(key for key, got in cells.items() if any(m == "none" for _, m in got))
+    head = " | ".join(f"{c}, {'stateless' if m == 'none' else 'memory'}" for c, m in MEMORY_COLUMNS)
+    lines = [f"| row (stateless and memory) | scene | {head} |", "|---|---|" + "---|" * len(MEMORY_COLUMNS)]
+    for scene, row in rows:
+        out = []
+        for column in MEMORY_COLUMNS:
+            got = cells[(scene, row)][column]
+            wins = sum(t["outcome"] == "success" for t in got)
+            out.append(f"{wins}/{len(got)} ({sum(t['steps'] for t in got) / len(got):.0f} steps)" if got else "")
+        lines.append(f"| {row} | {scene} | " + " | ".join(out) + " |")
     return "\n".join(lines)
 
 
@@ -107,6 +136,8 @@ def write_readmes(root: Path) -> None:
     readme, results = root.parent / "README.md", root.parent / "docs" / "results.md"
     readme.write_text(replace_table(readme.read_text(), summary_table(sets)))
     results.write_text(replace_table(results.read_text(), row_table(sets)))
+    memory = root.parent / "docs" / "pilot-memory.md"
+    memory.write_text(replace_table(memory.read_text(), memory_table(sets)))
     (root / "README.md").write_text(replace_table((root / "README.md").read_text(), trial_lines(sets)))
 
 
@@ -120,6 +151,8 @@ def main() -> None:
     print(summary_table(sets))
     print()
     print(row_table(sets))
+    print()
+    print(memory_table(sets))
     print()
     print(trial_lines(sets))
 

@@ -114,7 +114,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
         pilot_option: PilotOptionOpt = None,
-        profile: Annotated[str, typer.Option("--profile", help=PROFILE_HELP)] = "paper",
+        profile: Annotated[str | None, typer.Option("--profile", help=PROFILE_HELP + " Default: ranged with a "
+                                                    "forward range sensor, else paper.")] = None,
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
         shield: Annotated[str | None, typer.Option(
@@ -143,11 +144,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     link failed (link_lost), 2 for bad input, 130 when interrupted."""
     from vlnpilot.core.environment import check_capabilities
     from vlnpilot.core.exits import check_base_url, exit_code_for
+    from vlnpilot.core.fsm import default_profile
+    from vlnpilot.core.ranging import forward_range
     from vlnpilot.core.rundir import claim_run_dir, default_run_dir
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
-    from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
     from vlnpilot.safety import default_shield
@@ -162,6 +165,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
+    profile = profile or default_profile(forward_range(sensors))
     config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
                            context=context or DEFAULT_CONTEXT)
     if pilot is None:
@@ -399,16 +403,19 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     Exit code 0 when every episode was flown to an outcome, 3 when any ended in pilot_error, 2 for bad input."""
     from vlnpilot.bench.command import bench_command
     from vlnpilot.bench.results import RESULTS, ResultsLog
+    from vlnpilot.bench.suite import suite_pins
     from vlnpilot.core.exits import check_base_url, exit_code_for
     from vlnpilot.pilots.options import parse_option_pairs
     from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.safety import DEFAULT_SHIELD
 
+    pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
+    options["context"] = context or pinned_context or DEFAULT_CONTEXT
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
-                              profile=profile, base_url=check_base_url(base_url), shield=shield,
-                              context=context, default_shield=DEFAULT_SHIELD, default_context=DEFAULT_CONTEXT,
+                              profile=profile, base_url=check_base_url(base_url),
+                              shield=shield or pinned_shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
                               plugins=tuple(plugin or ()), sensors=sensors)
     if report:

@@ -8,8 +8,8 @@ from typing import Any
 
 from vlnpilot.bench.executors import BenchError
 from vlnpilot.bench.manifest import MANIFEST
-from vlnpilot.bench.suite import load_suite
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
+from vlnpilot.bench.suite import suite_pins
 from vlnpilot.core.ranging import range_sensor
 
 
@@ -24,8 +24,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
                   seed: int | None = None, profile: str | None = None, base_url: str | None = None,
                   progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
                   render: bool = True, pilot_options: Mapping[str, str] | None = None,
-                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none",
-                  context: str | None = None, default_shield: str = "off", default_context: str = "paper") -> Path:
+                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none") -> Path:
     """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
 
     `suite`: 'paper' or a YAML file. `pilots`: 'oracle,openai:gpt-4.1' or a list. reps / max_steps / seed /
@@ -36,8 +35,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     pilot's options class and given to every pilot that takes the option; recorded with the pilot (and hashed).
     Raises BenchError (a VLNPilotError) when episodes failed, after recording every finished one: rerun with
     resume=True to fly only the missing ones. `sensors`: the range sensors (none | tof | multiranger) of every
-    row's drone that names none itself. `context` and `shield`: given, they win; else the suite's pin (the paper
-    suite pins the paper's context and no shield); else `default_context` / `default_shield` (the CLI's defaults).
+    row's drone that names none itself. A suite may pin its shield and context (the paper suite pins no shield and
+    the paper's context): `shield` and `episode_options['context']`, given, win over a pin.
     """
     if console is None:
         from rich.console import Console
@@ -52,8 +51,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     elif resume and not (Path(out) / MANIFEST).is_file():
         raise BenchError(f"--resume --out {out}: there is no bench there to resume (no {MANIFEST}); give the "
                          "directory of an earlier bench, or drop --resume to start one")
-    shield, context = _pinned(suite, shield, context, default_shield, default_context)
-    options = {"shield": shield.lower(), **({"context": context} if context != "paper" else {}), **(episode_options or {})}
+    options = _with_pins(suite, shield, dict(episode_options or {}))
     settings = BenchSettings(
         suite=suite, pilots=pilots if isinstance(pilots, str) else tuple(pilots), out=out, reps=reps,
         max_steps=max_steps, seed=seed,
@@ -92,9 +90,12 @@ def print_report(report: BenchReport, console: Any) -> None:
                   + ", ".join(str(p) for p in report.tables[:3]), highlight=False)
 
 
-def _pinned(suite: str | Path, shield: str | None, context: str | None, default_shield: str,
-            default_context: str) -> tuple[str, str]:
-    """The shield and context a bench flies: the option given, else the suite's pin, else the default. (A paper
-    context is left out of the episode options, as before pins existed, so that earlier benches keep their hash.)"""
-    pins = load_suite(suite)
-    return shield or pins.shield or default_shield, context or pins.context or default_context
+
+def _with_pins(suite: str | Path, shield: str | None, options: dict[str, Any]) -> dict[str, Any]:
+    """The episode options with the shield and context the bench flies: as given, else as the suite pins them (else
+    no shield and the paper's context). A paper context is left out, as before pins existed, so that earlier benches
+    keep their config hash."""
+    pinned_shield, pinned_context = suite_pins(suite)
+    context = options.pop("context", None) or pinned_context or "paper"
+    return {"shield": (shield or pinned_shield or "off").lower(), **({"context": context} if context != "paper"
+                                                                   else {}), **options}

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import re
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -180,6 +181,12 @@ def _pin(data: dict[str, Any], key: str, valid: Iterable[str], errors: list[str]
     return str(value)
 
 
+def suite_pins(suite: str | Path) -> tuple[str | None, str | None]:
+    """The shield and context a suite pins (None where it pins none)."""
+    loaded = load_suite(suite)
+    return loaded.shield, loaded.context
+
+
 def load_suite(suite: str | Path) -> Suite:
     """A built-in suite by name (`paper`, `houses`, `houses:SEEDS`) or a YAML file; refused with every problem
     listed if it is invalid."""
@@ -283,7 +290,8 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     if errors:
         raise SuiteError(f"suite {source} is invalid:\n  - " + "\n  - ".join(errors))
     return Suite(name=str(data.get("name") or default_name), rows=tuple(rows), scene=scene.name, repetitions=reps,
-                 max_steps=max_steps, seed=seed, profile=profile, context=context, shield=shield, spawn_jitter_m=jm, spawn_jitter_deg=jd,
+                 max_steps=max_steps, seed=seed, profile=profile, context=context, shield=shield,
+                 spawn_jitter_m=jm, spawn_jitter_deg=jd,
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
                  description=str(data.get("description") or ""), source=source, refused=tuple(refused))
 

@@ -52,6 +52,12 @@ def range_sensor(name: str | None) -> RangeSensor | None:
     return SENSORS[key]
 
 
+def forward_range(name: str | None) -> bool:
+    """Whether the sensor set named by `--sensors` has a forward beam (what licenses longer approach moves)."""
+    sensor = range_sensor(name)
+    return sensor is not None and "front" in sensor.directions
+
+
 @dataclass(frozen=True)
 class RangeReading:
     """One beam's reading: `metres` None when nothing is within `max_m`."""

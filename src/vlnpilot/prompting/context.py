@@ -158,7 +158,8 @@ class PilotContext:
         reported two origins, "flown in this state" and "since the crossing began", one move apart)."""
         text = in_state_text(self._moves, self._in_state)
         if self._state is State.GO_THROUGH_DOOR and self._since_door is not None:
-            text += f" The crossing so far, the move that entered this state included: forward {self._since_door.forward_m:.2f} m."
+            crossing = self._since_door.forward_m
+            text += f" The crossing so far, the move that entered this state included: forward {crossing:.2f} m."
         return text
 
     def lines(self, step: int, state: State | None = None, readings: tuple[RangeReading, ...] = ()) -> tuple[str, ...]:

@@ -129,7 +129,8 @@ def _cue_text(cue: CloseCue) -> str:
     then = (f", then about {cue.then_m:g} m further straight ahead (about {round(cue.then_m / _A1_M)} `A1`, or until "
             "the safety system stops the drone): center its middle and face it squarely before its ends leave the "
             "image, because they tell where its middle is; but a drone already over its near end (its top fills the "
-            "bottom of the image from side to side) is within the distance: center its middle and stop") if cue.then_m else ""
+            "bottom of the image from side to side) is within the distance: center its middle and stop"
+            ) if cue.then_m else ""
     return f"{cue.shown_as}: the whole width (both its ends outside the image){then}"
 
 
