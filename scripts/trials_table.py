@@ -89,6 +89,25 @@ def row_table(sets: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def mission_table(root: Path, sets: dict[str, list[dict]]) -> str:
+    """The missions flown by real VLMs, planning included (issue 22): mission success, ISR (each stage judged on its
+    own: stages judged a success / stages flown) and CSR (stages reached in a row / all stages), per set."""
+    lines = ["| missions (real VLMs, planning included) | missions | stages | mission success | ISR | CSR |",
+             "|---|---|---|---|---|---|"]
+    for name in sorted((n for n in sets if n.startswith("missions")), key=_order):
+        stages = reached = flown = wins = 0
+        for t in sets[name]:
+            result = json.loads((root / name / t["row"] / "summary.json").read_text())["result"]
+            stages += result["stages"]
+            reached += result["stages_reached"]
+            flown += result["stages_reached"] + (t["outcome"] != "success")
+            wins += t["outcome"] == "success"
+        n = len(sets[name])
+        lines.append(f"| {LABELS.get(name, name)} | {n} | {stages} | {wins}/{n} | {reached}/{flown} = "
+                     f"{reached / flown:.2f} | {reached}/{stages} = {reached / stages:.2f} |")
+    return "\n".join(lines)
+
+
 MEMORY_COLUMNS = (("paper", "conversation"), ("paper", "none"), ("plus", "conversation"), ("plus", "none"))
 
 
@@ -134,7 +153,8 @@ def write_readmes(root: Path) -> None:
     """Put the tables into README.md (summary), docs/results.md (rows) and trials/README.md (one line per trial)."""
     sets = load(root)
     readme, results = root.parent / "README.md", root.parent / "docs" / "results.md"
-    readme.write_text(replace_table(readme.read_text(), summary_table(sets)))
+    readme.write_text(replace_table(replace_table(readme.read_text(), summary_table(sets)),
+                                    mission_table(root, sets)))
     results.write_text(replace_table(results.read_text(), row_table(sets)))
     memory = root.parent / "docs" / "pilot-memory.md"
     memory.write_text(replace_table(memory.read_text(), memory_table(sets)))
@@ -153,6 +173,8 @@ def main() -> None:
     print(row_table(sets))
     print()
     print(memory_table(sets))
+    print()
+    print(mission_table(root, sets))
     print()
     print(trial_lines(sets))
 
