@@ -98,16 +98,19 @@ class CloseCue:
     any_view: bool = False  # the width holds from any side, not only from the front (a round pot, a low box)
 
 
-FRIDGE_SIZED = CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (with the "
-                        "cabinet under it), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION)
+FRIDGE_SIZED = CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (its "
+                        "countertop and the cabinet under it, at their widest), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION)
 OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
     CloseCue(("toilet",), "a toilet", 0.25),
     CloseCue(("plant",), "a potted plant", 0.35, any_view=True),
-    CloseCue(("stove",), "a stove (the cooktop and oven, not the counter beside them)", 0.50, any_view=True),
+    CloseCue(("stove",), "a stove (the cooktop, the oven door and the hood above them, not the counter beside them)",
+             0.50, any_view=True),
     FRIDGE_SIZED,
     CloseCue(("shower",), "a shower", 0.80),
     CloseCue(("bookshelf",), "a bookshelf", 0.85),
-    CloseCue(("tv",), "a TV (with the cabinet it stands on)", 0.85),
+    # The TV's own black body, as the monitor measures it: the cabinet under it stands nearer and looks wider (two
+    # pilots who measured the cabinet stopped at 1.00 and 1.18 m).
+    CloseCue(("tv",), "a TV (its black body and screen, not the cabinet it stands on)", 0.85),
     CloseCue(("bed", "desk", "wardrobe"), "a bed, a desk, a wardrobe, a sofa or anything wider", FILLS_THE_WIDTH,
              then_m=0.5),
 )
