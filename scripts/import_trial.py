@@ -83,6 +83,9 @@ def write_suite(set_dir: Path) -> Path:
         goal = {"room": task["goal_room"], **({"target": task["goal_target"]} if task["goal_target"] else {})}
         rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], "goal": goal,
                      "scene": trial["scene"]})
+        sensors = (summary.get("capabilities") or {}).get("range_sensor") or "none"
+        if sensors != "none":  # the drone it was flown with: a replay must carry the same sensor
+            rows[-1]["sensors"] = sensors
         limits.add(summary["config"]["max_steps"])
         profiles.add(summary["config"]["profile"])
         pins.add((trial.get("context") or "paper", trial.get("shield") or "off"))
