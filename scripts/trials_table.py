@@ -31,6 +31,7 @@ LABELS = {  # the sets in the order the tables list them (a set not named here c
     "objects-none": "unseen houses, the same objects, plus context, no range sensor",
     "objects20-tof": "unseen houses, 20 objects of all 12 kinds, plus context, ToF, ranged profile",
     "objects20-none": "unseen houses, the same 20 objects, plus context, no range sensor, fast profile",
+    "objects-tv-none": "unseen houses, TV rows after the TV's cue named its own body, no range sensor, fast profile",
     "missions-houses-fast": "missions of two and three stages, unseen houses, plus context, fast profile",
     "stateless-houses-paper": "unseen houses, paper context, one fresh pilot per step (stateless)",
     "stateless-houses-plus": "unseen houses, plus context, one fresh pilot per step (stateless)",

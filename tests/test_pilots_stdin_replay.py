@@ -228,7 +228,7 @@ def test_cli_progress_survives_brackets_in_the_description(tmp_path: Path) -> No
     answer = json.dumps({"room": "bedroom", "movement": "C1", "state": "Stay on Room",
                          "description": "a [/] sign and [bold] text", "door_position": "not_visible"})
     result = CliRunner().invoke(cli.app, ["run", "Go to the bedroom", "--spawn", "bedroom", "--pilot", "stdin",
-                                          "--out", str(tmp_path / "r")], input=answer + "\n")
+                                          "--context", "paper", "--out", str(tmp_path / "r")], input=answer + "\n")
     assert result.exit_code == 0 and "a [/] sign" in result.stdout
 
 
@@ -239,3 +239,20 @@ def test_replay_flies_the_same_recording_twice(geo: Simulator, tmp_path: Path) -
     for _ in range(2):  # a new episode at step 1 is not a re-ask of the last one
         replayed, steps = fly(geo, pilot, "bedroom", "Go to the bedroom")
         assert same_result(replayed, recorded) and strip(steps) == strip(rec_steps)
+
+
+TRIALS = Path(__file__).resolve().parents[1] / "trials"
+
+
+def test_run_replays_a_trial_with_the_settings_it_was_flown_with(tmp_path: Path) -> None:
+    """`vln-pilot run --pilot replay:TRIAL` with no --context flies the trial's context (a paper-context trial under
+    the plus default would be refused); an explicit option still wins, and is refused for naming another setting."""
+    trial = TRIALS / "baseline" / "living-bedroom"
+    args = ["run", "Go to the bedroom", "--scene", "cabin-v1", "--spawn", "living_room", "--pilot",
+            f"replay:{trial}", "--no-video", "-q"]
+    result = CliRunner().invoke(cli.app, [*args, "--out", str(tmp_path / "a")])
+    assert result.exit_code == 0, result.output
+    summary, _ = load_run(tmp_path / "a")
+    assert summary["config"]["context"]["preset"] == "paper" and summary["result"]["outcome"] == "success"
+    refused = CliRunner().invoke(cli.app, [*args, "--out", str(tmp_path / "b"), "--context", "plus"])
+    assert isinstance(refused.exception, ConfigError) and "--context paper" in str(refused.exception)

@@ -150,6 +150,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.pilots.replay import recorded_settings
     from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
@@ -158,16 +159,17 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     robot = check_robot(robot, tello_host)
     capabilities = robot_capabilities(robot, sensors, tello_host)  # refuses a sensor the drone does not carry
-    shield = shield or default_shield(capabilities.ground_truth)
+    recorded = recorded_settings(pilot)  # a replay flies as it was flown, unless an option says otherwise
+    shield = shield or recorded.get("shield") or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
-    profile = profile or default_profile(forward_range(sensors))
+    profile = profile or recorded.get("profile") or default_profile(forward_range(sensors))
     config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
-                           context=context or DEFAULT_CONTEXT)
+                           context=context or recorded.get("context") or DEFAULT_CONTEXT)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")

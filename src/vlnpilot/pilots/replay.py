@@ -154,3 +154,17 @@ def _recording(source: Path, row: str | None) -> Path | None:
     if row not in trials:
         raise ConfigError(f"{source} has no trial for row {row!r}; its trials: {', '.join(trials)}")
     return source / row
+
+
+def recorded_settings(spec: str | None) -> dict[str, str]:
+    """What a `replay:RUN_DIR` pilot's run was flown with (context, profile, shield), so that `vln-pilot run` flies
+    the replay as it was flown unless an option says otherwise; {} for another pilot or a set of trials."""
+    if not spec or not spec.startswith("replay:"):
+        return {}
+    run_dir = Path(spec.removeprefix("replay:"))
+    if not (run_dir / "summary.json").is_file():
+        return {}
+    config = load_run(run_dir)[0].get("config", {})
+    settings = {"context": (config.get("context") or {}).get("preset", "paper"), "profile": config.get("profile"),
+                "shield": config.get("shield")}
+    return {key: str(value) for key, value in settings.items() if value}

@@ -99,7 +99,8 @@ class CloseCue:
 
 
 FRIDGE_SIZED = CloseCue(("refrigerator", "mirror", "sink"), "a fridge, a mirror (its frame), a sink (its "
-                        "countertop and the cabinet under it, at their widest), or any object of about their size", OBJECT_CLOSE_WIDTH_FRACTION)
+                        "countertop and the cabinet under it, at their widest), or any object of about their size",
+                        OBJECT_CLOSE_WIDTH_FRACTION)
 OBJECT_CLOSE_CUES: tuple[CloseCue, ...] = (
     CloseCue(("toilet",), "a toilet", 0.25),
     CloseCue(("plant",), "a potted plant", 0.35, any_view=True),
