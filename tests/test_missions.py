@@ -194,3 +194,15 @@ def test_the_episode_report_marks_the_stage_boundaries(sim, tmp_path):
     page = write_episode_report(tmp_path / "run").read_text()
     assert result.success and page.count('<tr class="stage-start">') == 2
     assert "<strong>Stage 2</strong>: find sink in bathroom" in page
+
+
+@pytest.mark.parametrize("name", ["missions", "missions-houses"])
+def test_a_mission_suite_reads_back_from_its_manifest(name):
+    """A bench writes its suite into bench.json and its tables read it back: a mission row must come back as the
+    same mission (by its plan), not as a one-goal query that no longer parses to its goal."""
+    from vlnpilot.bench.suite import load_suite, suite_from_dict
+
+    suite = load_suite(name)
+    again = suite_from_dict(suite.to_dict(), source="bench.json")
+    assert [r.canonical() for r in again.rows] == [r.canonical() for r in suite.rows]
+    assert any(r.mission is not None for r in again.rows)

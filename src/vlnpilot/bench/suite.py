@@ -152,10 +152,7 @@ class Suite:
                 "profile": self.profile, **{k: v for k, v in (("context", self.context), ("shield", self.shield)) if v},
                 "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
                 "spawn_labels": dict(self.spawn_labels),
-                "rows": [{"id": r.id, "spawn": r.spawn, "query": r.query,
-                          "goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})},
-                          **({"scene": r.scene} if r.scene else {}), **({"sensors": r.sensors} if r.sensors else {})}
-                         for r in self.rows]}
+                "rows": [_row_dict(r) for r in self.rows]}
 
     def dump(self) -> str:
         return yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
@@ -179,6 +176,15 @@ def _pin(data: dict[str, Any], key: str, valid: Iterable[str], errors: list[str]
         errors.append(f"unknown {key} {value!r}; valid: {', '.join(valid)}")
         return None
     return str(value)
+
+
+def _row_dict(r: SuiteRow) -> dict[str, Any]:
+    """A row as plain data that `suite_from_dict` reads back: a mission row by its plan (its goal alone would be
+    read back as a one-goal query, which a mission's instruction is not)."""
+    what = ({"plan": Mission.from_dict(r.mission).plan()} if r.mission is not None else
+            {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}})
+    return {"id": r.id, "spawn": r.spawn, "query": r.query, **what, **({"scene": r.scene} if r.scene else {}),
+            **({"sensors": r.sensors} if r.sensors else {})}
 
 
 def suite_pins(suite: str | Path) -> tuple[str | None, str | None]:
