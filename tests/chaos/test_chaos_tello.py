@@ -267,7 +267,8 @@ def test_a_replay_of_a_default_sim_run_is_refused_before_take_off(sim_runs, tmp_
                                 "--out", str(tmp_path / "run"), "--no-video", "--quiet")
         received = [c for _, c in emu.log.received]
     assert code == BAD_INPUT and len(err.strip().splitlines()) == 1, err
-    assert "was flown with other settings; replay it with --shield geometry" in err
+    # The replay asks for the shield it was flown with, which a Tello cannot have: refused, naming the valid ones.
+    assert "--shield geometry needs ground truth" in err and "valid shields here: off, assist" in err
     assert received == []  # not even `command`: nothing was sent before the refusal
 
 
