@@ -119,14 +119,16 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         quiet: Annotated[bool, typer.Option("--quiet", "-q", help="No per-step lines.")] = False,
         video: Annotated[bool, typer.Option("--video/--no-video", help="Write episode.mp4 and .gif.")] = True,
         shield: Annotated[str | None, typer.Option(
-            "--shield", help="off, geometry, depth or assist (default: geometry; with a Tello: assist).")] = None,
+            "--shield", help="off, geometry, depth, assist or a registered one (default: geometry; with a "
+            "Tello: assist).")] = None,
         overlay: Annotated[str | None, typer.Option("--overlay", help="Image aid for the model: corridor.")] = None,
         context: Annotated[str | None, typer.Option("--context", help="Pilot context: paper (the paper's five "
                                                     "inputs) or plus (odometry, budget, memory, confirmation; the "
                                                     "default, measured best: docs/pilot-memory.md).")] = None,
         overwrite: Annotated[bool, typer.Option("--overwrite", help="Replace a run already in --out.")] = False,
         sensors: SensorsOpt = "none",
-        robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator) or tello.")] = "sim",
+        robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator), tello or a "
+                                           "registered one.")] = "sim",
         tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
         judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
                                            "declared outcome.")] = "ask",
@@ -390,20 +392,21 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           profile: Annotated[str | None, typer.Option("--profile", help=PROFILE_HELP)] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           pilot_option: PilotOptionOpt = None,
-          shield: Annotated[str | None, typer.Option("--shield", help="off, geometry or depth (default: the "
-                                                     "suite's pin, else geometry).")] = None,
+          shield: Annotated[str | None, typer.Option("--shield", help="off, geometry, depth, assist or a registered "
+                                                     "one (default: the suite's pin, else geometry).")] = None,
           overlay: Annotated[str | None, typer.Option("--overlay", help="corridor")] = None,
           context: Annotated[str | None, typer.Option("--context", help="Pilot context: paper or plus (default: the "
                                                       "suite's pin, else plus).")] = None,
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
           sensors: SensorsOpt = "none",
           plugin: Annotated[list[str] | None, typer.Option(
-              "--plugin", help="A module to import first, in every worker too: it may register pilots and "
-              "executors. Repeatable.")] = None) -> None:
+              "--plugin", help="A module to import first, in every worker too: it may register pilots, "
+              "executors and shields. Repeatable.")] = None) -> None:
     """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report.
 
     Exit code 0 when every episode was flown to an outcome, 3 when any ended in pilot_error, 2 for bad input."""
     from vlnpilot.bench.command import bench_command
+    from vlnpilot.bench.episode_job import import_plugins
     from vlnpilot.bench.results import RESULTS, ResultsLog
     from vlnpilot.bench.suite import suite_pins
     from vlnpilot.core.exits import check_base_url, exit_code_for
@@ -411,6 +414,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.safety import DEFAULT_SHIELD
 
+    import_plugins(tuple(plugin or ()))  # first: a plugin's shield may be what the suite pins
     pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     options["context"] = context or pinned_context or DEFAULT_CONTEXT

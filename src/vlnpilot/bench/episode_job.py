@@ -121,8 +121,8 @@ class TimedPilot:
 
 
 def import_plugins(plugins: Sequence[str]) -> None:
-    """Import modules that register extra pilots or executors (`@register_pilot`, `@register_executor`), in a
-    worker or in the parent."""
+    """Import modules that register extra pilots, executors or shields (`@register_pilot`, `@register_executor`,
+    `@register_shield`), in a worker or in the parent."""
     for module in plugins:
         try:
             importlib.import_module(module)

@@ -42,7 +42,7 @@ from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
 from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.fsm import PROFILES
 from vlnpilot.prompting.context import CONTEXT_PRESETS
-from vlnpilot.safety.config import SHIELDS
+from vlnpilot.safety.shields import SHIELD_REGISTRY
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
 from vlnpilot.tasks.mission import Mission, PlanError, as_mission
@@ -254,7 +254,8 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     profile = str(data.get("profile", "paper"))
     if profile not in PROFILES:
         errors.append(f"unknown profile {profile!r}; valid profiles: {', '.join(PROFILES)}")
-    context, shield = _pin(data, "context", CONTEXT_PRESETS, errors), _pin(data, "shield", SHIELDS, errors)
+    context = _pin(data, "context", CONTEXT_PRESETS, errors)
+    shield = _pin(data, "shield", SHIELD_REGISTRY.names(), errors)
     jitter = data.get("spawn_jitter") or {}
     jm = jd = 0.0
     if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:

@@ -14,7 +14,7 @@ from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fsm import PROFILES, State
 from vlnpilot.pilots.base import Pilot
 from vlnpilot.prompting.context import ContextConfig, context_preset
-from vlnpilot.safety import OVERLAYS, SHIELDS, SafetyConfig
+from vlnpilot.safety import OVERLAYS, SHIELD_REGISTRY, SafetyConfig
 from vlnpilot.tasks.task import SuccessConfig, Task
 
 __all__ = ["OUTCOMES", "EpisodeConfig", "Gate", "JudgeOutcome", "LoopControl"]
@@ -33,7 +33,9 @@ class EpisodeConfig:
     max_failed_steps: int = 3  # consecutive steps without a valid decision before `pilot_error`
     success: SuccessConfig = field(default_factory=SuccessConfig)
     seed: int | None = None
-    shield: str = "off"  # off | geometry | depth (the CLI defaults to safety.DEFAULT_SHIELD in the simulator)
+    # A name in safety.SHIELD_REGISTRY: off | geometry | depth | assist | a registered one (the CLI defaults to
+    # safety.DEFAULT_SHIELD in the simulator)
+    shield: str = "off"
     safety: SafetyConfig = field(default_factory=SafetyConfig)  # margin, door assist, oscillation guard, depth
     overlay: str | None = None  # None | "corridor": draw the propeller-tip corridor on the image the pilot sees
     # Wall-clock bound on one step's pilot calls, re-asks and provider retries included, for pilots that wait on
@@ -55,8 +57,8 @@ class EpisodeConfig:
             raise ConfigError(f"unknown FSM profile {self.profile!r}; valid profiles: {', '.join(PROFILES)}")
         if self.max_reasks < 0:
             raise ConfigError("max_reasks must be >= 0")
-        if str(self.shield).lower() not in SHIELDS:
-            raise ConfigError(f"unknown shield {self.shield!r}; valid shields: {', '.join(SHIELDS)}")
+        if str(self.shield).strip().lower() not in SHIELD_REGISTRY:
+            raise ConfigError(f"unknown shield {self.shield!r}; valid shields: {', '.join(SHIELD_REGISTRY)}")
         if self.step_deadline_s is not None and not self.step_deadline_s > 0:
             raise ConfigError(f"step_deadline_s must be positive or None, got {self.step_deadline_s!r}")
         if self.overlay is not None and self.overlay not in OVERLAYS:

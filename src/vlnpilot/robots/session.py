@@ -1,32 +1,108 @@
-"""Choosing the robot for `vln-pilot run --robot sim|tello` and serving the emulator; the CLI's thin wiring."""
+"""Choosing the robot for `vln-pilot run --robot NAME` (`ROBOT_REGISTRY`: sim, tello, or a registered one) and
+serving the emulator; the CLI's thin wiring."""
 
 from __future__ import annotations
 
 import ipaddress
 import threading
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from vlnpilot.core.environment import Capabilities
 from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.registry import Registry
 from vlnpilot.scene import Scene
 
-ROBOTS = ("sim", "tello")
+
+class Robot:
+    """What the command line needs of a robot flown with `--robot NAME`: what it carries for `--sensors`, and
+    opening it as a context manager. A third party subclasses it and registers an instance (or the class) with
+    `ROBOT_REGISTRY.register("NAME")` or through the `vlnpilot.robots` entry-point group."""
+
+    extra: str | None = None  # the pip extra it needs (`core.extras`), checked before anything else
+    takes_tello_host = False  # whether `--tello-host` applies to it
+
+    def carried(self, sensors: str, tello_host: str | None) -> tuple[Capabilities, str]:
+        """What it senses flown with `--sensors`, and how a refusal names it ('the NAME does not have ...')."""
+        raise NotImplementedError
+
+    def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
+             sensors: str) -> AbstractContextManager[Any]:
+        """The environment, released when the block ends, whatever happened."""
+        raise NotImplementedError
+
+
+class SimRobot(Robot):
+    """The embedded simulator: it simulates any range sensor asked for."""
+
+    def carried(self, sensors: str, tello_host: str | None) -> tuple[Capabilities, str]:
+        from vlnpilot.core.ranging import range_sensor
+        from vlnpilot.sim.simulator import Simulator
+
+        wanted = range_sensor(sensors)
+        return replace(Simulator.capabilities, range_sensor=wanted.name if wanted else "none"), "sim"
+
+    def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
+             sensors: str) -> AbstractContextManager[Any]:
+        from vlnpilot.sim import SimConfig, Simulator
+
+        return Simulator(scene, SimConfig(sensors=sensors))
+
+
+class TelloRobot(Robot):
+    """A real DJI Tello (or the emulator) over djitellopy: its modules are imported only when it is asked for."""
+
+    extra = "tello"
+    takes_tello_host = True
+
+    def carried(self, sensors: str, tello_host: str | None) -> tuple[Capabilities, str]:
+        from vlnpilot.robots.tello import tello_capabilities
+        from vlnpilot.robots.tello_config import load_tello_config
+
+        carried = tello_capabilities(load_tello_config(**({"host": tello_host} if tello_host else {})))
+        return carried, "Tello" if carried.range_sensor == "tof" else "plain Tello (tello.yaml: ext_tof false)"
+
+    @contextmanager
+    def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
+             sensors: str) -> Iterator[Any]:
+        from vlnpilot.robots.tello import TelloEnv
+        from vlnpilot.robots.tello_config import load_tello_config
+
+        config = load_tello_config(**({"host": tello_host} if tello_host else {}))
+        tello = TelloEnv(scene, config, event_log=event_log, operator=operator, sensors=sensors)
+        try:
+            yield tello
+        finally:
+            tello.close()  # landed and released, whatever happened
+
+
+# Robots by name (`core.registry`); `--robot` accepts every name in it.
+ROBOT_REGISTRY: Registry[Robot | type[Robot]] = Registry("robot", group="vlnpilot.robots")
+ROBOT_REGISTRY.add("sim", SimRobot())
+ROBOT_REGISTRY.add("tello", TelloRobot())
+
+
+def get_robot(robot: str) -> Robot:
+    """The registered robot called `robot` (a registered class is instantiated); a bad name lists the valid."""
+    key = str(robot).strip().lower()
+    if key not in ROBOT_REGISTRY:
+        raise UnknownNameError("robot", robot, ROBOT_REGISTRY.names())
+    entry = ROBOT_REGISTRY.get(key)
+    return entry() if isinstance(entry, type) else entry
 
 
 def check_robot(robot: str, tello_host: str | None) -> str:
-    key = str(robot).strip().lower()
-    if key not in ROBOTS:
-        raise UnknownNameError("robot", robot, ROBOTS)
-    if key == "tello":
+    """The robot's registered name, once its extra is installed and `--tello-host` fits it (one line if not)."""
+    key, found = str(robot).strip().lower(), get_robot(robot)
+    if found.extra is not None:
         from vlnpilot.core.extras import require
 
-        require("tello", what="--robot tello")
-    if tello_host is not None and key != "tello":
-        raise ConfigError("--tello-host applies to --robot tello only")
+        require(found.extra, what=f"--robot {key}")
+    if tello_host is not None and not found.takes_tello_host:
+        raise ConfigError(f"--tello-host applies to --robot {_host_robots()} only")
     if tello_host is not None:
         try:
             ipaddress.ip_address(tello_host)  # djitellopy matches replies by the sender's address, not a name
@@ -36,23 +112,18 @@ def check_robot(robot: str, tello_host: str | None) -> str:
     return key
 
 
+def _host_robots() -> str:
+    return " or ".join(name for name in ROBOT_REGISTRY.names() if get_robot(name).takes_tello_host)
+
+
 def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None = None) -> Capabilities:
     """What `robot` senses when flown with `--sensors`; refuses (one line) a sensor it does not carry."""
     from vlnpilot.core.environment import check_sensors
     from vlnpilot.core.ranging import range_sensor
 
     wanted = range_sensor(sensors)
-    if robot == "tello":
-        from vlnpilot.robots.tello import tello_capabilities
-        from vlnpilot.robots.tello_config import load_tello_config
-
-        carried = tello_capabilities(load_tello_config(**({"host": tello_host} if tello_host else {})))
-        robot = "Tello" if carried.range_sensor == "tof" else "plain Tello (tello.yaml: ext_tof false)"
-    else:
-        from vlnpilot.sim.simulator import Simulator
-
-        carried = replace(Simulator.capabilities, range_sensor=wanted.name if wanted else "none")  # any, simulated
-    check_sensors(carried, robot, sensors)
+    carried, shown_as = get_robot(robot).carried(sensors, tello_host)
+    check_sensors(carried, shown_as, sensors)
     return replace(carried, range_sensor=wanted.name if wanted else "none")
 
 
@@ -60,21 +131,9 @@ def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None
 def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
                operator: Any = None, sensors: str = "none") -> Iterator[Any]:
     """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened."""
-    if robot == "sim":
-        from vlnpilot.sim import SimConfig, Simulator
-
-        with Simulator(scene, SimConfig(sensors=sensors)) as env:
-            yield env
-        return
-    from vlnpilot.robots.tello import TelloEnv
-    from vlnpilot.robots.tello_config import load_tello_config
-
-    config = load_tello_config(**({"host": tello_host} if tello_host else {}))
-    tello = TelloEnv(scene, config, event_log=event_log, operator=operator, sensors=sensors)
-    try:
-        yield tello
-    finally:
-        tello.close()
+    with get_robot(robot).open(scene, tello_host=tello_host, event_log=event_log, operator=operator,
+                               sensors=sensors) as env:
+        yield env
 
 
 def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,

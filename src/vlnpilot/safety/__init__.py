@@ -33,7 +33,9 @@ Every change is an `Intervention(step, source, proposed, executed, reason)`: in 
 `EpisodeResult.interventions`, and, as text, in the next prompt's controller feedback.
 
 Knowledge sources (`make_shield(name, env)`, from what `env` declares in `environment.Capabilities`; a shield
-the environment cannot serve is refused with one line naming the ones it can):
+the environment cannot serve is refused with one line naming the ones it can). Shields are chosen by name from
+`SHIELD_REGISTRY` (`core.registry`, entry-point group `vlnpilot.shields`): `off`, `geometry`, `depth`, `assist`
+and any a third party registers with `@register_shield("NAME")`:
 - `geometry` (needs `ground_truth`): the simulator's collision geometry through a narrow query
   (`clearance_at(pose, max_distance)` of `types.GroundTruth`), evaluated at a superset of the poses at which the
   simulator checks the motion (its `substeps`). Exact: a command it lets through never collides in the
@@ -67,7 +69,6 @@ from vlnpilot.safety.config import (
     GUARD_NOTE,
     OVERLAYS,
     SHIELD_NOTE,
-    SHIELDS,
     DepthConfig,
     Intervention,
     OscillationConfig,
@@ -89,12 +90,14 @@ from vlnpilot.safety.overlay import (
     draw_corridor,
 )
 from vlnpilot.safety.shields import (
+    SHIELD_REGISTRY,
     ClearanceQuery,
     DepthShield,
     GeometryShield,
     Shield,
     make_shield,
     outline_corners,
+    register_shield,
     shorter_commands,
 )
 
@@ -114,7 +117,7 @@ __all__ = [
     "OscillationConfig",
     "OscillationEvent",
     "OscillationGuard",
-    "SHIELDS",
+    "SHIELD_REGISTRY",
     "SHIELD_NOTE",
     "SafetyConfig",
     "SafetyLayer",
@@ -125,6 +128,7 @@ __all__ = [
     "make_safety",
     "make_shield",
     "obstacle_kind",
+    "register_shield",
     "outline_corners",
     "shorter_commands",
 ]

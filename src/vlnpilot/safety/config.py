@@ -9,7 +9,6 @@ from vlnpilot.core.commands import Command
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fsm import State
 
-SHIELDS = ("off", "geometry", "depth", "assist")  # assist: door assist and oscillation guard, no shield (a Tello)
 DEFAULT_SHIELD = "geometry"  # the CLI's default in the simulator; the library default stays "off" (paper behaviour)
 
 

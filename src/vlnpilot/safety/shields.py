@@ -13,7 +13,8 @@ from vlnpilot.core.commands import COMMANDS, HOVER, Command, Kind
 from vlnpilot.core.environment import Environment, capabilities_of, depth_sensing_of, ground_truth_of, usable_shields
 from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.records import Motion, Observation, Pose
-from vlnpilot.safety.config import _MIN_CLEARANCE, SHIELDS, SafetyConfig, obstacle_kind
+from vlnpilot.core.registry import Registry
+from vlnpilot.safety.config import _MIN_CLEARANCE, SafetyConfig, obstacle_kind
 
 
 # -- geometry helpers -------------------------------------------------------------------------------------------
@@ -197,35 +198,60 @@ class DepthShield(Shield):
         return None
 
 
-def make_shield(name: str, env: Environment, config: SafetyConfig | None = None) -> Shield | None:
-    """The shield called `name` ('off', 'geometry', 'depth') for `env`, or None for 'off' (and 'assist').
+# Shields by name: a factory `(env, config) -> Shield | None` each (None: no shield, as 'off' and 'assist' have).
+# A third party registers with `@SHIELD_REGISTRY.register("NAME")` in a module it imports (a `--plugin`) or
+# through the `vlnpilot.shields` entry-point group; `--shield`, `EpisodeConfig` and the suites' pins then accept it.
+ShieldFactory = Callable[[Environment, SafetyConfig], Shield | None]
+SHIELD_REGISTRY: Registry[ShieldFactory] = Registry("shield", group="vlnpilot.shields")
 
-    Read from what `env` declares (`environment.Capabilities`): `geometry` needs ground truth, whose
+
+def register_shield(name: str) -> Callable[[ShieldFactory], ShieldFactory]:
+    """Register a shield factory `(env, config) -> Shield | None` under a (lower-case) name."""
+    return SHIELD_REGISTRY.register(name)
+
+
+def make_shield(name: str, env: Environment, config: SafetyConfig | None = None) -> Shield | None:
+    """The shield called `name` (`SHIELD_REGISTRY`) for `env`, or None for 'off' and 'assist'.
+
+    The built-ins read what `env` declares (`environment.Capabilities`): `geometry` needs ground truth, whose
     `clearance_at` and `substeps` are the simulator's collision geometry; `depth` needs a front depth image
     (`environment.DepthSensing`), and works on a drone without ground truth.
     """
-    config = config or SafetyConfig()
     key = str(name).strip().lower()
-    if key in ("off", "assist"):
-        return None
-    if key == "geometry":
-        gt = ground_truth_of(env)
-        if gt is None:
-            raise ConfigError("the geometry shield needs ground truth (the simulator's collision geometry), which "
-                              f"this environment does not declare; valid shields here: {_usable(env)}")
-        return GeometryShield(gt.clearance_at, config, gt.substeps)
-    if key == "depth":
-        sensor = depth_sensing_of(env)
-        if sensor is None:
-            raise ConfigError("the depth shield needs a front depth image, which this environment does not "
-                              f"declare; valid shields here: {_usable(env)}")
-        d = config.depth
+    if key not in SHIELD_REGISTRY:
+        raise UnknownNameError("shield", name, SHIELD_REGISTRY.names())
+    return SHIELD_REGISTRY.get(key)(env, config or SafetyConfig())
 
-        def depth_image() -> np.ndarray:
-            return sensor.front_depth(d.width, d.height)
 
-        return DepthShield(depth_image, config, sensor.substeps, fovy_deg=sensor.front_fovy_deg)
-    raise UnknownNameError("shield", name, SHIELDS)
+@register_shield("off")
+def _no_shield(env: Environment, config: SafetyConfig) -> Shield | None:
+    return None
+
+
+@register_shield("geometry")
+def _geometry_shield(env: Environment, config: SafetyConfig) -> Shield | None:
+    gt = ground_truth_of(env)
+    if gt is None:
+        raise ConfigError("the geometry shield needs ground truth (the simulator's collision geometry), which "
+                          f"this environment does not declare; valid shields here: {_usable(env)}")
+    return GeometryShield(gt.clearance_at, config, gt.substeps)
+
+
+@register_shield("depth")
+def _depth_shield(env: Environment, config: SafetyConfig) -> Shield | None:
+    sensor = depth_sensing_of(env)
+    if sensor is None:
+        raise ConfigError("the depth shield needs a front depth image, which this environment does not "
+                          f"declare; valid shields here: {_usable(env)}")
+    d = config.depth
+
+    def depth_image() -> np.ndarray:
+        return sensor.front_depth(d.width, d.height)
+
+    return DepthShield(depth_image, config, sensor.substeps, fovy_deg=sensor.front_fovy_deg)
+
+
+SHIELD_REGISTRY.add("assist", _no_shield)  # the door assist and oscillation guard alone (`make_safety`), a Tello's
 
 
 def _usable(env: object) -> str:
