@@ -38,6 +38,7 @@ class SimConfig:
     rear_width: int = 640
     rear_height: int = 480
     render: bool = True  # False: observations carry 1x1 black images (fast, for image-free pilots)
+    rear_camera: bool = True  # False: no chase render, `rear_rgb` is a 1x1 placeholder (nothing records the rear)
     substep_m: float = 0.02
     substep_deg: float = 4.0
     bisect_iterations: int = 6
@@ -57,6 +58,11 @@ class SimConfig:
                 raise ConfigError(f"{what} camera resolution {w}x{h} is outside 16x16..{max_w}x{max_h}")
         if self.substep_m <= 0 or self.substep_deg <= 0:
             raise ConfigError("substep sizes must be positive")
+
+
+def no_image() -> np.ndarray:
+    """The placeholder of a camera not rendered: 1x1 black (recordings skip it)."""
+    return np.zeros((1, 1, 3), np.uint8)
 
 
 def yaw_quat(yaw_deg: float) -> np.ndarray:
@@ -295,7 +301,7 @@ class Simulator:
     def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
         self._sync()
         front = self.render(drone.FRONT_CAMERA)
-        rear = self.render(drone.REAR_CAMERA)
+        rear = self.render(drone.REAR_CAMERA) if self.config.rear_camera else no_image()
         return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
                            contact=contact[0] if contact else None, step=self._step,
                            contact_part=contact[1] if contact else None)
@@ -315,7 +321,7 @@ class Simulator:
         """RGB (HxWx3 uint8) or depth (HxW float32, metres) image from a named camera at the current pose."""
         cfg = self.config
         if not cfg.render and not depth:
-            return np.zeros((1, 1, 3), np.uint8)
+            return no_image()
         front = camera == drone.FRONT_CAMERA
         w = width or (cfg.width if front else cfg.rear_width)
         h = height or (cfg.height if front else cfg.rear_height)
