@@ -96,7 +96,6 @@ def print_report(report: BenchReport, console: Any) -> None:
                   + ", ".join(str(p) for p in report.tables[:3]), highlight=False)
 
 
-
 def _with_pins(suite: str | Path, shield: str | None, options: dict[str, Any]) -> dict[str, Any]:
     """The episode options with the shield and context the bench flies: as given, else as the suite pins them (else
     no shield and the paper's context). A paper context is left out, as before pins existed, so that earlier benches
