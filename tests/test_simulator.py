@@ -223,8 +223,9 @@ def test_without_the_rear_camera_the_front_is_the_same_and_the_rear_a_placeholde
     with Simulator("cabin", SimConfig(rear_camera=False)) as lean:
         both, front_only = _run(sim, seed=5), _run(lean, seed=5)
         calls: list[str] = []
-        render = lean.render
-        lean.render = lambda camera=drone.FRONT_CAMERA, *a, **k: calls.append(camera) or render(camera, *a, **k)
+        renderer = lean._renderers[(640, 480)]  # the one renderer of both 640x480 cameras
+        update = renderer.update_scene
+        renderer.update_scene = lambda data, camera, **k: calls.append(camera) or update(data, camera=camera, **k)
         lean.step("E")
     assert calls == [drone.FRONT_CAMERA]  # the chase camera is never rendered
     for a, b in zip(both, front_only, strict=True):

@@ -280,11 +280,13 @@ class Simulator:
         self._step += 1
         return self._observe(collided=hit is not None, contact=hit)
 
-    def _sync(self) -> None:
-        """Put the model at the drone's pose (collision queries may have moved it) and place the chase camera."""
+    def _sync(self, chase: bool = True) -> None:
+        """Put the model at the drone's pose (collision queries may have moved it) and, with `chase`, place the chase
+        camera (only its own render needs it)."""
         self._set_qpos(self._pose)
         mujoco.mj_forward(self.model, self.data)
-        self._place_chase_camera()
+        if chase:
+            self._place_chase_camera()
 
     def _place_chase_camera(self) -> None:
         """Pull the rear camera in front of any wall behind the drone, so the chase view never shows a wall's inside."""
@@ -299,9 +301,10 @@ class Simulator:
         mujoco.mj_camlight(m, d)
 
     def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
-        self._sync()
-        front = self.render(drone.FRONT_CAMERA)
-        rear = self.render(drone.REAR_CAMERA) if self.config.rear_camera else no_image()
+        rear_camera = self.config.rear_camera
+        self._sync(chase=rear_camera)  # once for both renders
+        front = self._draw(drone.FRONT_CAMERA)
+        rear = self._draw(drone.REAR_CAMERA) if rear_camera else no_image()
         return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
                            contact=contact[0] if contact else None, step=self._step,
                            contact_part=contact[1] if contact else None)
@@ -319,6 +322,14 @@ class Simulator:
     def render(self, camera: str = drone.FRONT_CAMERA, width: int | None = None, height: int | None = None,
                depth: bool = False) -> np.ndarray:
         """RGB (HxWx3 uint8) or depth (HxW float32, metres) image from a named camera at the current pose."""
+        if not self.config.render and not depth:
+            return no_image()
+        self._sync(chase=camera == drone.REAR_CAMERA)
+        return self._draw(camera, width, height, depth)
+
+    def _draw(self, camera: str, width: int | None = None, height: int | None = None, depth: bool = False
+              ) -> np.ndarray:
+        """`render` on a model already at the drone's pose (`_sync`)."""
         cfg = self.config
         if not cfg.render and not depth:
             return no_image()
@@ -326,7 +337,6 @@ class Simulator:
         w = width or (cfg.width if front else cfg.rear_width)
         h = height or (cfg.height if front else cfg.rear_height)
         r = self._renderer(w, h)
-        self._sync()
         if depth:
             r.enable_depth_rendering()
         try:
