@@ -6,7 +6,7 @@ JSON) must fit in the cores while the episodes wait. The fake (tests/fakes, the 
 through the official SDK) always answers a rotation and the current state, so every episode flies exactly
 --max-steps steps; --reps 8 makes 80 episodes, five full waves of 16.
 
-    .venv/bin/python bench/bench_throughput.py [--workers 16] [--delay 1.5] [--reps 8] [--max-steps 20]
+    .venv/bin/python bench/bench_throughput.py [--workers 16] [--delay 1.5] [--reps 8] [--max-steps 20] [--smoke]
 
 Prints the flight-window rate (first request to last answer), the end-to-end rate (including worker start),
 the fraction of the ideal, the machine and its load.
@@ -54,13 +54,22 @@ def main() -> None:
     ap.add_argument("--suite", default="paper")
     ap.add_argument("--out", type=Path, default=None, help="bench directory (default: a temporary one)")
     ap.add_argument("--no-progress", action="store_true")
+    ap.add_argument("--smoke", action="store_true", help="1 in flight, 0.01 s answers, 2 steps each (tests)")
     args = ap.parse_args()
+    if args.smoke:
+        args.workers, args.delay, args.reps, args.max_steps, args.no_progress = 1, 0.01, 1, 2, True
 
     from rich.console import Console
 
     console = Console(stderr=True)
     load_before = os.getloadavg()
-    with FakeOpenAI(oracle=rotate_in_place, delay=args.delay) as fake, tempfile.TemporaryDirectory() as tmp:
+    answered: list[float] = []  # when each answer left: the fake sleeps `delay`, then asks the oracle
+
+    def timed_rotation(request) -> dict:
+        answered.append(time.monotonic())
+        return rotate_in_place(request)
+
+    with FakeOpenAI(oracle=timed_rotation, delay=args.delay) as fake, tempfile.TemporaryDirectory() as tmp:
         out = args.out or Path(tmp) / "bench"
         settings = BenchSettings(suite=args.suite, pilots=("openai:fake-gpt",), out=out, reps=args.reps,
                                  max_steps=args.max_steps, base_url=fake.base_url, workers=args.workers,
@@ -68,11 +77,11 @@ def main() -> None:
         t0 = time.monotonic()
         report = run_bench(settings, console=console)
         wall = time.monotonic() - t0
-        times = sorted(r.received_at for r in fake.requests)
+        times = sorted(answered)
     load_after = os.getloadavg()
     calls = sum(s.pilot_calls for s in report.summaries)
     steps = sum(round(s.mean_steps * s.episodes) for s in report.summaries)
-    window = (times[-1] + args.delay - times[0]) if times else float("nan")
+    window = (times[-1] - (times[0] - args.delay)) if times else float("nan")  # first request to last answer
     ideal = args.workers / args.delay
     rate = steps / window
     s = report.summaries[0]

@@ -10,7 +10,7 @@ Per step it times what the controller and a model pilot do around the model call
 
 and prints the median and p90 per part and in total, with the machine. Budget: at most 30 ms per step.
 
-    .venv/bin/python bench/controller_cost.py [--steps 200] [--warmup 10] [--out DIR] [--json]
+    .venv/bin/python bench/controller_cost.py [--steps 200] [--warmup 10] [--out DIR] [--json] [--smoke]
 """
 
 from __future__ import annotations
@@ -134,7 +134,10 @@ def main() -> int:
     ap.add_argument("--warmup", type=int, default=10, help="untimed steps first (default 10)")
     ap.add_argument("--out", type=Path, default=None, help="run directory to record into (default: a temp dir)")
     ap.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
+    ap.add_argument("--smoke", action="store_true", help="3 steps, 1 warm-up (for the tests)")
     args = ap.parse_args()
+    if args.smoke:
+        args.steps, args.warmup = 3, 1
     if args.steps < 1 or args.warmup < 0:
         ap.error("--steps must be >= 1 and --warmup >= 0")
     with tempfile.TemporaryDirectory(prefix="vlnpilot-bench-") as tmp:

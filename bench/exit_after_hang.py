@@ -6,7 +6,7 @@ call. The child prints when the episode has ended; this script times from that l
 Before the fix the abandoned call sat in a non-daemon worker thread, so the exit waited for the SDK's time-out
 and retries (the report: 65 s late).
 
-    .venv/bin/python bench/exit_after_hang.py [--reps 5]
+    .venv/bin/python bench/exit_after_hang.py [--reps 5] [--smoke]
 """
 
 from __future__ import annotations
@@ -43,7 +43,10 @@ print("episode ended", flush=True)
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--reps", type=int, default=5)
+    parser.add_argument("--smoke", action="store_true", help="1 repetition (for the tests)")
     args = parser.parse_args()
+    if args.smoke:
+        args.reps = 1
     tests = str(Path(__file__).resolve().parents[1] / "tests")
     print(describe())
     delays = []

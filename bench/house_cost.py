@@ -1,7 +1,7 @@
 """Cost of procedural houses: generation plus MJCF compile per house, and a simulator step in a six-room
 house against the cabin.
 
-    .venv/bin/python bench/house_cost.py [--houses 40] [--steps 20] [--width 640] [--height 480]
+    .venv/bin/python bench/house_cost.py [--houses 40] [--steps 20] [--width 640] [--height 480] [--smoke]
 
 Generation is timed uncached (each seed built from scratch, its validation and refused sub-seeds included),
 then `scene_to_mjcf` and `mujoco.MjModel.from_xml_string` on the result. The step cost uses
@@ -57,7 +57,10 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20, help="steps per spawn for the step cost")
     ap.add_argument("--width", type=int, default=640)
     ap.add_argument("--height", type=int, default=480)
+    ap.add_argument("--smoke", action="store_true", help="2 houses, 1 step per spawn (for the tests)")
     args = ap.parse_args()
+    if args.smoke:
+        args.houses, args.steps = 2, 1
     print(f"machine: {describe()}")
     gen, total = generation_times(args.houses)
     med = statistics.median(total)

@@ -1,6 +1,6 @@
 """The safety layer's effect on procedural houses: `noisy-oracle` with the shield off and on, over a houses suite.
 
-    .venv/bin/python bench/house_shield_effect.py [--suite houses] [--reps 1] [--workers 2]
+    .venv/bin/python bench/house_shield_effect.py [--suite houses] [--reps 1] [--workers 2] [--smoke]
                                                   [--shields off,geometry] [--out bench/results/house_shield_effect.md]
 
 Every condition flies the same episodes (suite rows x reps, same episode seeds), so the pilot draws the same
@@ -68,11 +68,16 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--shields", default="off,geometry")
     ap.add_argument("--pilot", default="noisy-oracle")
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "house_shield_effect.md")
+    ap.add_argument("--smoke", action="store_true", help="2 rows, 3 steps, 1 worker, nothing written (for the tests)")
     args = ap.parse_args(argv)
+    if args.smoke:
+        args.workers = 1
     suite = load_suite(args.suite)
     shields = [s.strip() for s in args.shields.split(",") if s.strip()]
     jobs = [(s, r.id, r.scene or suite.scene, r.spawn, r.query, episode_seed(suite.seed, r.id, rep), args.pilot,
              suite.max_steps) for s in shields for r in suite.rows for rep in range(1, args.reps + 1)]
+    if args.smoke:  # the first two rows of one house, a few steps each
+        jobs = [(*j[:-1], 3) for j in jobs if j[1] in {r.id for r in suite.rows[:2]}]
     jobs.sort(key=lambda j: (j[2], j[0]))  # by house, so that a worker builds each house's simulator once
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn")) as pool:
@@ -84,7 +89,10 @@ def main(argv: list[str] | None = None) -> int:
         f"seeds in every condition), {suite.max_steps}-step limit, margin 5 cm. Wall time {wall:.0f} s on "
         f"{args.workers} worker processes, {cpu_model()} ({os.cpu_count()} cores visible), Python "
         f"{platform.python_version()}.", "", summarise(rows, shields), ""])
-    publish(text, args.out)
+    if args.smoke:
+        print(text)
+    else:
+        publish(text, args.out)
     return 0
 
 

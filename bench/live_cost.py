@@ -4,7 +4,7 @@ Flies the oracle's "Go to the bathroom" from the living room (recorded, as `vln-
 without the station and with it and a page connected (headless Chromium when /usr/bin/chromium exists, else a
 Server-Sent Events client), and prints the median time per step of each and their difference. Aim: <= 5 ms.
 
-    .venv/bin/python bench/live_cost.py [--reps 5] [--client chromium|sse]
+    .venv/bin/python bench/live_cost.py [--reps 5] [--client chromium|sse] [--smoke]
 """
 
 from __future__ import annotations
@@ -33,12 +33,13 @@ CHROMIUM = Path("/usr/bin/chromium")
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking", "--no-first-run"]
 
 
-def step_times(sim: Simulator, run_dir: Path, control: LiveControl | None, pilot: OraclePilot) -> list[float]:
+def step_times(sim: Simulator, run_dir: Path, control: LiveControl | None, pilot: OraclePilot,
+               max_steps: int = 60) -> list[float]:
     """Seconds between consecutive step records (the first step is measured from the episode's start)."""
     stamps = [time.perf_counter()]
     recorder = Recorder(run_dir)
     task = parse_query("Go to the bathroom", sim.scene)
-    run_episode(sim, pilot, task, EpisodeConfig(max_steps=60), spawn="living_room", recorder=recorder,
+    run_episode(sim, pilot, task, EpisodeConfig(max_steps=max_steps), spawn="living_room", recorder=recorder,
                 on_step=lambda _rec: stamps.append(time.perf_counter()), control=control)
     return [b - a for a, b in zip(stamps[1:], stamps[2:], strict=False)]  # the first includes reset and start
 
@@ -83,21 +84,25 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--reps", type=int, default=5)
     parser.add_argument("--client", choices=("chromium", "sse"), default="chromium" if CHROMIUM.exists() else "sse")
+    parser.add_argument("--smoke", action="store_true", help="1 repetition of 4 steps, SSE client (for the tests)")
     args = parser.parse_args()
+    if args.smoke:
+        args.reps, args.client = 1, "sse"
+    steps = 4 if args.smoke else 60
     plain: list[float] = []
     live: list[float] = []
     server_cpu = 0.0
     with Simulator("cabin") as sim, tempfile.TemporaryDirectory() as tmp:
         pilot = OraclePilot()
-        step_times(sim, Path(tmp) / "warm", None, pilot)  # warm-up: renderers, caches
+        step_times(sim, Path(tmp) / "warm", None, pilot, steps)  # warm-up: renderers, caches
         for rep in range(args.reps):
-            plain += step_times(sim, Path(tmp) / f"plain-{rep}", None, pilot)
+            plain += step_times(sim, Path(tmp) / f"plain-{rep}", None, pilot, steps)
             run_dir = Path(tmp) / f"live-{rep}"
             control = LiveControl(pilot)
             with LiveStation(run_dir, control=control, scene=sim.scene, port=0) as station, \
                     connected_page(station.url, args.client):
                 cpu0 = thread_cpu_s(station.native_id)
-                live += step_times(sim, run_dir, control, pilot)
+                live += step_times(sim, run_dir, control, pilot, steps)
                 time.sleep(0.5)  # let the page take the last step before it closes
                 server_cpu += thread_cpu_s(station.native_id) - cpu0
             control.finish()

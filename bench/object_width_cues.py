@@ -1,6 +1,6 @@
 """Do Reach Object's stop rules agree with the success monitor for every kind of object, from every side?
 
-    .venv/bin/python bench/object_width_cues.py [--houses 40] [--out bench/results/object_width_cues.md]
+    .venv/bin/python bench/object_width_cues.py [--houses 40] [--out bench/results/object_width_cues.md] [--smoke]
 
 The monitor measures to the nearest point of the object's footprint (`success.py`). The prompt names a width cue
 per kind of object (`success.OBJECT_CLOSE_CUES`) and, for a drone with a forward range sensor, a range rule for
@@ -93,7 +93,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--houses", type=int, default=40)
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "object_width_cues.md")
+    parser.add_argument("--smoke", action="store_true", help="the cabin only, nothing written (for the tests)")
     args = parser.parse_args()
+    if args.smoke:
+        print(table(measure(["cabin"]), 0))
+        return
     scenes = ["cabin", "cabin-v1", *(f"house:{seed}" for seed in range(args.houses))]
     publish(table(measure(scenes), args.houses), args.out)
 

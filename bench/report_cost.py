@@ -5,7 +5,7 @@ spot until the step limit, then times, over a few repetitions, `write_episode_re
 and both together in a fresh process (what `vln-pilot report RUN_DIR` costs, imports included). Prints the
 median of each and the machine it ran on. The budget is 10 s for the report of a 50-step episode.
 
-    .venv/bin/python bench/report_cost.py [--steps 50] [--reps 3] [--keep DIR]
+    .venv/bin/python bench/report_cost.py [--steps 50] [--reps 3] [--keep DIR] [--smoke]
 """
 
 from __future__ import annotations
@@ -65,7 +65,10 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=50)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--keep", type=Path, default=None, help="fly into this directory and keep it")
+    ap.add_argument("--smoke", action="store_true", help="a 3-step episode, 1 repetition (for the tests)")
     args = ap.parse_args()
+    if args.smoke:
+        args.steps, args.reps = 3, 1
 
     with tempfile.TemporaryDirectory() as tmp:
         run_dir = args.keep or Path(tmp) / "run"

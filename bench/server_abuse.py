@@ -10,7 +10,7 @@ The decode bomb (issue 26): a 78 KB PNG of 4096x4096 pixels, sent by `--bomb-cli
 in its own process (uvicorn on 127.0.0.1) and its peak resident memory (VmHWM) is reported. `--before REF` first
 measures the server of a git commit (exported with `git archive`), so that before and after come from one run.
 
-    .venv/bin/python bench/server_abuse.py [--requests 2000] [--reps 3] [--bomb-clients 64] [--before REF]
+    .venv/bin/python bench/server_abuse.py [--requests 2000] [--reps 3] [--bomb-clients 64] [--before REF] [--smoke]
 """
 
 from __future__ import annotations
@@ -170,7 +170,10 @@ def main() -> None:
     parser.add_argument("--bomb-rounds", type=int, default=2)
     parser.add_argument("--before", metavar="REF", help="also measure the decode bomb on this git commit")
     parser.add_argument("--only", choices=("names", "bomb"), help="run only one of the two")
+    parser.add_argument("--smoke", action="store_true", help="20 requests, 1 rep, 2 bomb clients (for the tests)")
     args = parser.parse_args()
+    if args.smoke:
+        args.requests, args.reps, args.bomb_clients, args.bomb_rounds = 20, 1, 2, 1
     os.environ.setdefault("OPENAI_API_KEY", "sk-not-a-real-key-bench")  # lets a leaky server build clients
     print(describe())
     if args.only != "names":

@@ -1,7 +1,7 @@
 """The effect of the safety layer: the paper suite flown by `noisy-oracle` with the shield off and on.
 
     .venv/bin/python bench/shield_effect.py [--reps 50] [--workers 2] [--shields off,geometry,depth]
-                                            [--out bench/results/shield_effect.md] [--seed 0]
+                                            [--out bench/results/shield_effect.md] [--seed 0] [--smoke]
 
 Every condition flies the same episodes (paper suite rows x reps, episode seed = seed + 100 * rep + row), so
 the pilot draws the same failures in each; only the safety layer differs. No frames are rendered (the depth
@@ -100,10 +100,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pilot", default="noisy-oracle")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "shield_effect.md")
+    ap.add_argument("--smoke", action="store_true", help="2 rows, 1 rep, 1 worker, nothing written (for the tests)")
     args = ap.parse_args(argv)
+    if args.smoke:
+        args.reps, args.workers = 1, 1
     shields = [s.strip() for s in args.shields.split(",") if s.strip()]
+    rows = range(2 if args.smoke else len(PAPER_SUITE))
     jobs = [(s, row, rep, args.seed + 100 * rep + row, args.pilot)
-            for s in shields for rep in range(args.reps) for row in range(len(PAPER_SUITE))]
+            for s in shields for rep in range(args.reps) for row in rows]
     t0 = time.perf_counter()
     with ProcessPoolExecutor(max_workers=args.workers, mp_context=mp.get_context("spawn"),
                              initializer=_init_worker) as pool:
@@ -121,7 +125,10 @@ def main(argv: list[str] | None = None) -> int:
         summarise(rows, shields),
         "",
     ])
-    publish(text, args.out)
+    if args.smoke:
+        print(text)
+    else:
+        publish(text, args.out)
     return 0
 
 

@@ -8,7 +8,7 @@ far each 10 cm rc pulse really moved the emulated drone, and the machine. On a r
 longer (the drone flies them; ~1-3 s), so these are the controller's own overheads: mostly the deliberate
 wait for a frame decoded after the motion settled.
 
-    .venv/bin/python bench/tello_step_cost.py [--rounds 3]
+    .venv/bin/python bench/tello_step_cost.py [--rounds 3] [--smoke]
 """
 
 from __future__ import annotations
@@ -44,7 +44,11 @@ def p90(values: list[float]) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=3, help="times the command mix is flown")
+    parser.add_argument("--smoke", action="store_true", help="one round of two commands (for the tests)")
     args = parser.parse_args()
+    sequence = SEQUENCE[1:3] if args.smoke else SEQUENCE  # a rotation and an rc pulse
+    if args.smoke:
+        args.rounds = 1
     state_port = free_port("")
     emu_cfg = EmulatorConfig(port=free_port(), state_port=state_port, video_port=free_port())
     timings: dict[str, list[float]] = {}
@@ -61,7 +65,7 @@ def main() -> None:
             env.reset("living_room")
             startup = time.perf_counter() - t0
             for _ in range(args.rounds):
-                for code in SEQUENCE:
+                for code in sequence:
                     before = emu.pose
                     t = time.perf_counter()
                     obs = env.step(get_command(code))

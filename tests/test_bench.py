@@ -291,3 +291,34 @@ def test_the_executor_is_closed_when_the_bench_fails(tiny: Path, tmp_path: Path)
         EXECUTOR_REGISTRY.unregister("failing")
     assert closed == [True]
     assert (tmp_path / "b" / "table.md").is_file()  # the tables are written whatever happened
+
+
+def test_a_bench_without_frames_renders_no_chase_view_and_a_resume_keeps_the_choice(tiny: Path, tmp_path: Path,
+                                                                                    monkeypatch) -> None:
+    import vlnpilot.sim
+
+    built: list[bool] = []
+
+    class Spy(vlnpilot.sim.Simulator):
+        def __init__(self, scene, config):
+            super().__init__(scene, config)
+            built.append(config.rear_camera)
+
+    monkeypatch.setattr(vlnpilot.sim, "Simulator", Spy)
+    out, console = tmp_path / "b", Console(file=io.StringIO())
+    bench_command(suite=str(tiny), pilots="oracle", reps=1, out=out, executor="inline", progress=False,
+                  frames=False, console=console)
+    assert built == [False] and not list(out.glob("runs/*/*/*/frames/*"))
+    assert json.loads((out / MANIFEST).read_text())["config"]["save_frames"] is False
+    bench_command(suite=str(tiny), pilots="oracle", reps=1, out=tmp_path / "c", executor="inline", progress=False,
+                  console=console)  # the default: frames, with the chase view the report's episode pages show
+    assert built == [False, True]
+    assert {p.name.split("_")[0] for p in (tmp_path / "c/runs/oracle/to-bedroom/1/frames").iterdir()} == {"front",
+                                                                                                         "rear"}
+    # resuming without saying keeps what the bench started with (else the config hash would refuse it)
+    results = out / "results.jsonl"
+    results.write_text(results.read_text().splitlines(keepends=True)[0])  # one episode to fly again
+    bench_command(suite=str(tiny), pilots="oracle", reps=1, out=out, executor="inline", progress=False, resume=True,
+                  console=console)
+    assert len(ResultsLog(results).read()) == 2
+    assert built == [False, True, False]

@@ -263,3 +263,19 @@ def test_a_plugin_registers_an_executor_the_command_line_can_use(monkeypatch: py
     assert code == 0, err
     assert "one by one (a plugin)" in " ".join(err.split())  # the console wraps long lines
     assert len((out / "results.jsonl").read_text().splitlines()) == 4
+
+
+@pytest.mark.parametrize(("options", "frames"), [(("--no-report",), False), (("--no-report", "--frames"), True)])
+def test_a_bench_without_a_report_records_no_frames_unless_asked(monkeypatch: pytest.MonkeyPatch,
+                                                                capsys: pytest.CaptureFixture[str], tmp_path: Path,
+                                                                options: tuple[str, ...], frames: bool) -> None:
+    """Nothing shows the frames of a bench without a report: they (and the chase camera's render) are skipped."""
+    from bench_records import TINY
+
+    (tmp_path / "tiny.yaml").write_text(TINY)
+    out = tmp_path / "b"
+    code, _, err = run_main(monkeypatch, capsys, "bench", "--suite", str(tmp_path / "tiny.yaml"), "--reps", "1",
+                            "--executor", "inline", "--out", str(out), *options)
+    assert code == 0, err
+    assert json.loads((out / "bench.json").read_text())["config"]["save_frames"] is frames
+    assert bool(list(out.glob("runs/*/*/*/frames/rear_*.jpg"))) is frames

@@ -217,3 +217,17 @@ def test_resolution_limits():
     with pytest.raises(ConfigError):
         SimConfig(width=1280, height=960)
     SimConfig(width=960, height=720)  # the largest allowed
+
+
+def test_without_the_rear_camera_the_front_is_the_same_and_the_rear_a_placeholder(sim):
+    with Simulator("cabin", SimConfig(rear_camera=False)) as lean:
+        both, front_only = _run(sim, seed=5), _run(lean, seed=5)
+        calls: list[str] = []
+        renderer = lean._renderers[(640, 480)]  # the one renderer of both 640x480 cameras
+        update = renderer.update_scene
+        renderer.update_scene = lambda data, camera, **k: calls.append(camera) or update(data, camera=camera, **k)
+        lean.step("E")
+    assert calls == [drone.FRONT_CAMERA]  # the chase camera is never rendered
+    for a, b in zip(both, front_only, strict=True):
+        assert a.pose == b.pose and np.array_equal(a.front_rgb, b.front_rgb)
+        assert a.rear_rgb.shape == (480, 640, 3) and b.rear_rgb.shape == (1, 1, 3)

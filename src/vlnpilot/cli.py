@@ -398,6 +398,9 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           context: Annotated[str | None, typer.Option("--context", help="Pilot context: paper or plus (default: the "
                                                       "suite's pin, else plus).")] = None,
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
+          frames: Annotated[bool | None, typer.Option(
+              "--frames/--no-frames", help="Record each step's camera frames (front and chase view) for the report's "
+              "episode pages (default: with --report; a resumed bench as it started).")] = None,
           sensors: SensorsOpt = "none",
           plugin: Annotated[list[str] | None, typer.Option(
               "--plugin", help="A module to import first, in every worker too: it may register pilots, "
@@ -423,7 +426,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                               profile=profile, base_url=check_base_url(base_url),
                               shield=shield or pinned_shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
-                              plugins=tuple(plugin or ()), sensors=sensors)
+                              plugins=tuple(plugin or ()), sensors=sensors,
+                              frames=frames if frames is not None or resume else report)
     if report:
         console.print(f"report: {_optional_report(bench_dir, bench=True)}")
     raise typer.Exit(exit_code_for(r["result"]["outcome"] for r in ResultsLog(bench_dir / RESULTS).read()))

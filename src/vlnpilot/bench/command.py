@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.bench.executors import BenchError
-from vlnpilot.bench.manifest import MANIFEST
+from vlnpilot.bench.manifest import MANIFEST, read_manifest
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 from vlnpilot.bench.suite import suite_pins
 from vlnpilot.core.ranging import range_sensor
@@ -24,7 +24,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
                   seed: int | None = None, profile: str | None = None, base_url: str | None = None,
                   progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
                   render: bool = True, pilot_options: Mapping[str, str] | None = None,
-                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none") -> Path:
+                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none",
+                  frames: bool | None = None) -> Path:
     """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
 
     `suite`: 'paper' or a YAML file. `pilots`: 'oracle,openai:gpt-4.1' or a list. reps / max_steps / seed /
@@ -36,7 +37,9 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     Raises BenchError (a VLNPilotError) when episodes failed, after recording every finished one: rerun with
     resume=True to fly only the missing ones. `sensors`: the range sensors (none | tof | multiranger) of every
     row's drone that names none itself. A suite may pin its shield and context (the paper suite pins no shield and
-    the paper's context): `shield` and `episode_options['context']`, given, win over a pin.
+    the paper's context): `shield` and `episode_options['context']`, given, win over a pin. `frames`: record each
+    step's camera frames, which the report's episode pages show; False writes none and skips the chase camera's
+    render, used by nothing else. None: as the resumed bench recorded them, else True.
     """
     if console is None:
         from rich.console import Console
@@ -52,12 +55,15 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         raise BenchError(f"--resume --out {out}: there is no bench there to resume (no {MANIFEST}); give the "
                          "directory of an earlier bench, or drop --resume to start one")
     options = _with_pins(suite, shield, dict(episode_options or {}))
+    if frames is None:  # a resumed bench goes on as it started (the choice is in its config hash)
+        manifest = read_manifest(out) if resume else None
+        frames = bool(manifest["config"].get("save_frames", True)) if manifest else True
     settings = BenchSettings(
         suite=suite, pilots=pilots if isinstance(pilots, str) else tuple(pilots), out=out, reps=reps,
         max_steps=max_steps, seed=seed,
         profile=profile, base_url=base_url, pilot_options=dict(pilot_options or {}), executor=executor,
         episode_options=options,
-        workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render,
+        workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render and frames,
         plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors))
     try:
         report = run_bench(settings, console=console)

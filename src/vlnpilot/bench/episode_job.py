@@ -68,13 +68,15 @@ class SimulatorCache:
         self._all: list[Any] = []
         self._lock = threading.Lock()
 
-    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none") -> Any:
+    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",
+            rear_camera: bool = True) -> Any:
         from vlnpilot.sim import SimConfig, Simulator
 
         sims = getattr(self._local, "sims", None)
         if sims is None:
             sims = self._local.sims = {}
-        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors))
+        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors,
+                                rear_camera=rear_camera))
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
@@ -148,7 +150,10 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     from vlnpilot.tasks.mission import Mission
     from vlnpilot.tasks.task import Task
 
-    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors)
+    frames = spec.save_frames and spec.render
+    # the chase camera is seen only in the recorded frames (the episode pages of the report): without them, not rendered
+    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors,
+                         rear_camera=frames)
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
@@ -157,7 +162,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     task = (Mission.from_dict(spec.mission) if spec.mission is not None
             else Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target))
     result = run_recorded_episode(sim, pilot, task, config, run_dir=run_dir, spawn=spec.spawn,
-                                  pilot_spec=spec.pilot, save_frames=spec.save_frames and spec.render)
+                                  pilot_spec=spec.pilot, save_frames=frames)
     return {
         "key": spec.key, "pilot": spec.pilot, "model": pilot.model, "row": spec.row, "rep": spec.rep,
         "seed": spec.seed, "spawn": spec.spawn, "query": spec.query, "goal_room": spec.goal_room,

@@ -96,7 +96,7 @@ class TelloEmulator:
 
         self.config, self.clock = config or EmulatorConfig(), clock or WallClock()
         self.sim = sim = Simulator(scene, SimConfig(render=False, sensors="tof" if self.config.ext_tof else "none"))
-        self._camera = (scene, SimConfig(width=width, height=height, rear_width=16, rear_height=16))
+        self._camera = (scene, SimConfig(width=width, height=height, rear_camera=False))
         self._viewer: Simulator | None = None  # created on the video thread
         spawn_obj = sim.scene.spawn(spawn) if spawn else sim.scene.spawns[0]
         self.home = spawn_obj.pose

@@ -51,11 +51,11 @@ class CabinEnv(gym.Env):
         self.scene = load_scene(scene)
         self.spawn = self._resolve_spawn(spawn)
         self.goal_room = self._resolve_room(goal_room)
-        # the rear view is only wanted for render(); without a render mode keep its render as cheap as possible
-        rear = (width, height) if render_mode == "rgb_array" else (16, 16)
-        self.sim = Simulator(self.scene, SimConfig(width=width, height=height, rear_width=rear[0],
-                                                   rear_height=rear[1], spawn_jitter_m=spawn_jitter_m,
-                                                   spawn_jitter_deg=spawn_jitter_deg, sensors=sensors))
+        # the rear view is only wanted for render(): without a render mode it is not rendered
+        self.sim = Simulator(self.scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height,
+                                                   rear_camera=render_mode == "rgb_array",
+                                                   spawn_jitter_m=spawn_jitter_m, spawn_jitter_deg=spawn_jitter_deg,
+                                                   sensors=sensors))
         self.commands: tuple[Command, ...] = tuple(COMMANDS.values())
 
         (xmin, ymin), (xmax, ymax) = self.scene.bounds

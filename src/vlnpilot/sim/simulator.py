@@ -38,6 +38,7 @@ class SimConfig:
     rear_width: int = 640
     rear_height: int = 480
     render: bool = True  # False: observations carry 1x1 black images (fast, for image-free pilots)
+    rear_camera: bool = True  # False: no chase render, `rear_rgb` is a 1x1 placeholder (nothing records the rear)
     substep_m: float = 0.02
     substep_deg: float = 4.0
     bisect_iterations: int = 6
@@ -57,6 +58,11 @@ class SimConfig:
                 raise ConfigError(f"{what} camera resolution {w}x{h} is outside 16x16..{max_w}x{max_h}")
         if self.substep_m <= 0 or self.substep_deg <= 0:
             raise ConfigError("substep sizes must be positive")
+
+
+def no_image() -> np.ndarray:
+    """The placeholder of a camera not rendered: 1x1 black (recordings skip it)."""
+    return np.zeros((1, 1, 3), np.uint8)
 
 
 def yaw_quat(yaw_deg: float) -> np.ndarray:
@@ -274,11 +280,13 @@ class Simulator:
         self._step += 1
         return self._observe(collided=hit is not None, contact=hit)
 
-    def _sync(self) -> None:
-        """Put the model at the drone's pose (collision queries may have moved it) and place the chase camera."""
+    def _sync(self, chase: bool = True) -> None:
+        """Put the model at the drone's pose (collision queries may have moved it) and, with `chase`, place the chase
+        camera (only its own render needs it)."""
         self._set_qpos(self._pose)
         mujoco.mj_forward(self.model, self.data)
-        self._place_chase_camera()
+        if chase:
+            self._place_chase_camera()
 
     def _place_chase_camera(self) -> None:
         """Pull the rear camera in front of any wall behind the drone, so the chase view never shows a wall's inside."""
@@ -293,9 +301,10 @@ class Simulator:
         mujoco.mj_camlight(m, d)
 
     def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
-        self._sync()
-        front = self.render(drone.FRONT_CAMERA)
-        rear = self.render(drone.REAR_CAMERA)
+        rear_camera = self.config.rear_camera
+        self._sync(chase=rear_camera)  # once for both renders
+        front = self._draw(drone.FRONT_CAMERA)
+        rear = self._draw(drone.REAR_CAMERA) if rear_camera else no_image()
         return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
                            contact=contact[0] if contact else None, step=self._step,
                            contact_part=contact[1] if contact else None)
@@ -313,14 +322,21 @@ class Simulator:
     def render(self, camera: str = drone.FRONT_CAMERA, width: int | None = None, height: int | None = None,
                depth: bool = False) -> np.ndarray:
         """RGB (HxWx3 uint8) or depth (HxW float32, metres) image from a named camera at the current pose."""
+        if not self.config.render and not depth:
+            return no_image()
+        self._sync(chase=camera == drone.REAR_CAMERA)
+        return self._draw(camera, width, height, depth)
+
+    def _draw(self, camera: str, width: int | None = None, height: int | None = None, depth: bool = False
+              ) -> np.ndarray:
+        """`render` on a model already at the drone's pose (`_sync`)."""
         cfg = self.config
         if not cfg.render and not depth:
-            return np.zeros((1, 1, 3), np.uint8)
+            return no_image()
         front = camera == drone.FRONT_CAMERA
         w = width or (cfg.width if front else cfg.rear_width)
         h = height or (cfg.height if front else cfg.rear_height)
         r = self._renderer(w, h)
-        self._sync()
         if depth:
             r.enable_depth_rendering()
         try:
