@@ -395,6 +395,9 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                                                       "suite's pin, else plus).")] = None,
           report: Annotated[bool, typer.Option("--report/--no-report", help="Write report.html.")] = True,
           sensors: SensorsOpt = "none",
+          rate_limit: Annotated[str | None, typer.Option(
+              "--rate-limit", help="RPM,TPM: the requests and tokens per minute each provider and model may "
+              "take, shared by every worker, until the provider's rate-limit headers say otherwise.")] = None,
           plugin: Annotated[list[str] | None, typer.Option(
               "--plugin", help="A module to import first, in every worker too: it may register pilots and "
               "executors. Repeatable.")] = None) -> None:
@@ -417,7 +420,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                               profile=profile, base_url=check_base_url(base_url),
                               shield=shield or pinned_shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
-                              plugins=tuple(plugin or ()), sensors=sensors)
+                              plugins=tuple(plugin or ()), sensors=sensors, rate_limit=rate_limit)
     if report:
         console.print(f"report: {_optional_report(bench_dir, bench=True)}")
     raise typer.Exit(exit_code_for(r["result"]["outcome"] for r in ResultsLog(bench_dir / RESULTS).read()))

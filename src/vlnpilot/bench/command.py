@@ -11,6 +11,7 @@ from vlnpilot.bench.manifest import MANIFEST
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 from vlnpilot.bench.suite import suite_pins
 from vlnpilot.core.ranging import range_sensor
+from vlnpilot.pilots.ratelimit import parse_rate_limit
 
 
 def _checked_sensors(name: str) -> str:
@@ -24,7 +25,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
                   seed: int | None = None, profile: str | None = None, base_url: str | None = None,
                   progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
                   render: bool = True, pilot_options: Mapping[str, str] | None = None,
-                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none") -> Path:
+                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none",
+                  rate_limit: str | None = None) -> Path:
     """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
 
     `suite`: 'paper' or a YAML file. `pilots`: 'oracle,openai:gpt-4.1' or a list. reps / max_steps / seed /
@@ -36,8 +38,10 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     Raises BenchError (a VLNPilotError) when episodes failed, after recording every finished one: rerun with
     resume=True to fly only the missing ones. `sensors`: the range sensors (none | tof | multiranger) of every
     row's drone that names none itself. A suite may pin its shield and context (the paper suite pins no shield and
-    the paper's context): `shield` and `episode_options['context']`, given, win over a pin.
+    the paper's context): `shield` and `episode_options['context']`, given, win over a pin. `rate_limit`: 'RPM,TPM',
+    the budget of each provider and model until its rate-limit headers say otherwise (pilots/ratelimit.py).
     """
+    limit = parse_rate_limit(rate_limit)  # a bad value: one line, before anything runs
     if console is None:
         from rich.console import Console
 
@@ -58,7 +62,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         profile=profile, base_url=base_url, pilot_options=dict(pilot_options or {}), executor=executor,
         episode_options=options,
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render,
-        plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors))
+        plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors),
+        rate_limit=f"{limit.rpm:g},{limit.tpm or 0:g}" if limit else None)
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:
