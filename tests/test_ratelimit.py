@@ -173,3 +173,40 @@ def test_a_429_neither_fails_the_episode_nor_counts_as_a_step(geo_sim):
     assert result.outcome == "success", result.reason
     assert result.steps == answered  # the five 429s are no steps
     assert result.invalid_decisions == 0
+
+
+def test_progress_line_shows_the_rate_the_allowed_rate_and_the_limit(tmp_path, clock):
+    from vlnpilot.bench.rate_column import rate_line
+
+    budget = RateBudget(budget_file(tmp_path, "OpenAI", "gpt-4.1"), RateLimit(60, None), clock, clock.sleep)
+    budget.acquire()
+    budget.acquire()
+    budget.observe(429, {})
+    line = rate_line(tmp_path, clock)
+    assert line == "OpenAI-gpt-4.1: 2/min (allowed 30, limit 60 option, 1 x 429)"
+    assert rate_line(tmp_path / "none", clock) == "" and rate_line(None) == ""
+
+
+def test_a_bench_shares_the_budget_in_its_directory_and_429s_fail_nothing(tmp_path, monkeypatch):
+    import io
+    import json
+
+    from rich.console import Console
+
+    from bench_records import TINY
+    from vlnpilot.bench.command import bench_command
+    from vlnpilot.bench.results import ResultsLog
+
+    monkeypatch.setenv("OPENAI_API_KEY", "sk-test")
+    suite = tmp_path / "tiny.yaml"
+    suite.write_text(TINY.replace("repetitions: 2", "repetitions: 1").replace("max_steps: 30", "max_steps: 4"))
+    with FakeOpenAI().limit(rpm=1000, tpm=10_000_000) as fake:
+        fake.push("rate_limit", times=2)
+        out = bench_command(suite=str(suite), pilots="openai:gpt-4.1", out=tmp_path / "b", executor="inline",
+                            base_url=fake.base_url, pilot_options={"max_retries": "0"},
+                            progress=False, console=Console(file=io.StringIO()), rate_limit="100,50000")
+    records = ResultsLog(out / "results.jsonl").read()
+    assert len(records) == 2 and all(r["result"]["outcome"] != "pilot_error" for r in records)
+    state = json.loads((out / "rate" / "OpenAI-gpt-4.1.json").read_text())
+    assert (state["limit_rpm"], state["source"], state["throttled"]) == (1000, "headers", 2)
+    share_budgets(None)

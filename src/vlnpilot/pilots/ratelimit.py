@@ -234,18 +234,20 @@ def _take(state: dict[str, Any], now: float) -> float:
 
 def _learn(state: dict[str, Any], limits: LimitHeaders) -> None:
     """The provider's headers win over the option: its limits, and its remaining counts as an upper bound."""
+    first = state["source"] != "headers"
     if limits.limit_rpm:
-        first = state["source"] != "headers"
         state["limit_rpm"], state["source"] = limits.limit_rpm, "headers"
         rate = state["rate_rpm"]
         state["rate_rpm"] = (limits.limit_rpm if rate is None or (first and not state["throttled"])
                              else min(rate, limits.limit_rpm))
     if limits.limit_tpm:
         state["limit_tpm"] = limits.limit_tpm
-    if limits.left_requests is not None and state["rate_rpm"]:
-        state["bucket"] = min(state["bucket"], limits.left_requests)
-    if limits.left_tokens is not None and state["limit_tpm"]:
-        state["tokens"] = min(state["tokens"], limits.left_tokens)
+    if first:  # the account may be busy already (another bench): start from what is left. Later, a remaining
+        # count near 0 only means the window is full at the allowed rate, which the bucket already paces.
+        if limits.left_requests is not None and state["rate_rpm"]:
+            state["bucket"] = min(state["bucket"], limits.left_requests)
+        if limits.left_tokens is not None and state["limit_tpm"]:
+            state["tokens"] = min(state["tokens"], limits.left_tokens)
 
 
 def _back_off(state: dict[str, Any], now: float) -> None:
