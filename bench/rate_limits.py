@@ -46,7 +46,7 @@ FINISHING_STEPS = 2  # the 60 rpm bench flies every episode to its end: 64 x 2 c
 
 
 def run_scenario(rpm: int | None, seconds: float, in_flight: int, episodes_total: int | None = None,
-                 steps: int = STEPS_PER_EPISODE) -> dict:
+                 steps: int = STEPS_PER_EPISODE, option: bool = True) -> dict:
     """Episodes back to back in `in_flight` threads for `seconds` (or, given `episodes_total`, until that many
     have flown: a bench that finishes); the steps' finish times, failures, 429s."""
     finished: list[float] = []
@@ -55,7 +55,7 @@ def run_scenario(rpm: int | None, seconds: float, in_flight: int, episodes_total
     with tempfile.TemporaryDirectory() as rate_dir, FakeOpenAI(delay=LATENCY_S) as fake:
         if rpm:
             fake.limit(rpm=rpm, tpm=None)
-        share_budgets(rate_dir, parse_rate_limit(str(rpm)) if rpm else None)
+        share_budgets(rate_dir, parse_rate_limit(str(rpm)) if rpm and option else None)
         t0 = time.monotonic()
         stop = t0 + seconds if episodes_total is None else float("inf")
         left = [episodes_total if episodes_total is not None else -1]
@@ -124,6 +124,8 @@ def main() -> None:
     parser.add_argument("--in-flight", type=int, default=IN_FLIGHT)
     parser.add_argument("--smoke", action="store_true", help="a few seconds and 4 in flight: does it run?")
     parser.add_argument("--only", choices=("300", "60", "none"), help="one scenario")
+    parser.add_argument("--headers-only", action="store_true",
+                        help="no --rate-limit: the budgets learn the limit from the first responses' headers")
     args = parser.parse_args()
     seconds, in_flight = (2 * WINDOW_S + 1, 4) if args.smoke else (args.seconds, args.in_flight)
     print(f"machine: {describe()}")
@@ -132,8 +134,9 @@ def main() -> None:
     for rpm in (300, 60, None):
         if args.only and args.only != str(rpm or "none"):
             continue
-        result = (run_scenario(rpm, seconds, in_flight, episodes_total=in_flight, steps=FINISHING_STEPS) if rpm == 60
-                  else run_scenario(rpm, seconds, in_flight))
+        option = not args.headers_only
+        result = (run_scenario(rpm, seconds, in_flight, in_flight, FINISHING_STEPS, option) if rpm == 60
+                  else run_scenario(rpm, seconds, in_flight, option=option))
         median, whole = rates(result)
         ideal = min(in_flight / LATENCY_S, rpm / 60) if rpm else in_flight / LATENCY_S
         share = result["throttled"] / max(1, result["calls"])
