@@ -210,3 +210,10 @@ def test_a_bench_shares_the_budget_in_its_directory_and_429s_fail_nothing(tmp_pa
     state = json.loads((out / "rate" / "OpenAI-gpt-4.1.json").read_text())
     assert (state["limit_rpm"], state["source"], state["throttled"]) == (1000, "headers", 2)
     share_budgets(None)
+
+
+def test_no_request_left_closes_the_budget_until_the_reset(tmp_path, clock):
+    budget = RateBudget(tmp_path / "b.json", None, clock, clock.sleep)
+    budget.observe(200, {"x-ratelimit-limit-requests": "60", "x-ratelimit-remaining-requests": "0",
+                         "x-ratelimit-reset-requests": "30s"})
+    assert budget.acquire() == pytest.approx(30.0)  # not the bucket's 1 s: the provider's window is full

@@ -65,10 +65,12 @@ def parse_rate_limit(text: str | None) -> RateLimit | None:
 
 # ------------------------------------------------------------------ the providers' headers
 _OPENAI = {"limit_rpm": "x-ratelimit-limit-requests", "limit_tpm": "x-ratelimit-limit-tokens",
-           "left_requests": "x-ratelimit-remaining-requests", "left_tokens": "x-ratelimit-remaining-tokens"}
+           "left_requests": "x-ratelimit-remaining-requests", "left_tokens": "x-ratelimit-remaining-tokens",
+           "reset_requests_s": "x-ratelimit-reset-requests"}
 _ANTHROPIC = {"limit_rpm": "anthropic-ratelimit-requests-limit", "limit_tpm": "anthropic-ratelimit-tokens-limit",
               "left_requests": "anthropic-ratelimit-requests-remaining",
-              "left_tokens": "anthropic-ratelimit-tokens-remaining"}
+              "left_tokens": "anthropic-ratelimit-tokens-remaining",
+              "reset_requests_s": "anthropic-ratelimit-requests-reset"}
 
 
 @dataclass(frozen=True)
@@ -79,12 +81,14 @@ class LimitHeaders:
     limit_tpm: float | None = None
     left_requests: float | None = None
     left_tokens: float | None = None
+    reset_requests_s: float | None = None  # seconds until a request is free again
 
 
 def read_limit_headers(headers: Mapping[str, str] | Any) -> LimitHeaders | None:
     """The OpenAI or Anthropic rate-limit headers of a response, or None if it sends neither."""
     for names in (_OPENAI, _ANTHROPIC):
-        values = {field: _number(headers.get(name)) for field, name in names.items()}
+        values = {field: (parse_reset(headers.get(name)) if field == "reset_requests_s" else _number(headers.get(name)))
+                  for field, name in names.items()}
         if any(v is not None for v in values.values()):
             return LimitHeaders(**values)
     return None
@@ -117,7 +121,8 @@ def _number(value: Any) -> float | None:
 def _fresh_state(default: RateLimit | None) -> dict[str, Any]:
     rpm, tpm = (default.rpm, default.tpm) if default else (None, None)
     return {"limit_rpm": rpm, "limit_tpm": tpm, "source": "option" if default else None, "rate_rpm": rpm,
-            "bucket": 1.0, "tokens": tpm or 0.0, "at": None, "sent": [], "calls": 0, "throttled": 0}
+            "bucket": 1.0, "tokens": tpm or 0.0, "at": None, "sent": [], "calls": 0, "throttled": 0,
+            "closed_until": 0.0}
 
 
 class RateBudget:
@@ -176,7 +181,7 @@ class RateBudget:
             now = self.clock()
             _refill(state, now)
             if limits is not None:
-                _learn(state, limits)
+                _learn(state, limits, now)
             if status == 429:
                 _back_off(state, now)
             elif 200 <= status < 300:
@@ -219,6 +224,8 @@ def _take(state: dict[str, Any], now: float) -> float:
     _refill(state, now)
     rate, token_rate = state["rate_rpm"], _token_rate(state)
     waits = []
+    if state.get("closed_until", 0.0) > now:  # the provider said: nothing is left until then
+        waits.append(state["closed_until"] - now)
     if rate and state["bucket"] < 1.0 - EPSILON:
         waits.append((1.0 - state["bucket"]) * WINDOW_S / rate)
     if token_rate and state["tokens"] < -EPSILON:
@@ -232,8 +239,10 @@ def _take(state: dict[str, Any], now: float) -> float:
     return 0.0
 
 
-def _learn(state: dict[str, Any], limits: LimitHeaders) -> None:
-    """The provider's headers win over the option: its limits, and its remaining counts as an upper bound."""
+def _learn(state: dict[str, Any], limits: LimitHeaders, now: float) -> None:
+    """The provider's headers win over the option: its limits; no request left closes the budget until the reset."""
+    if limits.left_requests == 0 and limits.reset_requests_s is not None:
+        state["closed_until"] = max(state.get("closed_until", 0.0), now + limits.reset_requests_s)
     first = state["source"] != "headers"
     if limits.limit_rpm:
         state["limit_rpm"], state["source"] = limits.limit_rpm, "headers"
