@@ -402,6 +402,9 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
               "--frames/--no-frames", help="Record each step's camera frames (front and chase view) for the report's "
               "episode pages (default: with --report; a resumed bench as it started).")] = None,
           sensors: SensorsOpt = "none",
+          rate_limit: Annotated[str | None, typer.Option(
+              "--rate-limit", help="RPM,TPM: the requests and tokens per minute each provider and model may "
+              "take, shared by every worker, until the provider's rate-limit headers say otherwise.")] = None,
           plugin: Annotated[list[str] | None, typer.Option(
               "--plugin", help="A module to import first, in every worker too: it may register pilots, "
               "executors and shields. Repeatable.")] = None) -> None:
@@ -426,7 +429,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                               profile=profile, base_url=check_base_url(base_url),
                               shield=shield or pinned_shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
-                              plugins=tuple(plugin or ()), sensors=sensors,
+                              plugins=tuple(plugin or ()), sensors=sensors, rate_limit=rate_limit,
                               frames=frames if frames is not None or resume else report)
     if report:
         console.print(f"report: {_optional_report(bench_dir, bench=True)}")

@@ -109,12 +109,24 @@ def test_an_invalid_thinking_budget_names_the_valid_ones(model, budget) -> None:
 # -- episodes: re-asks, abandoned calls, over-long replies ---------------------------------------------------------
 def test_a_transient_failure_is_not_re_asked_nor_told_to_the_model(geo_sim) -> None:
     with FakeOpenAI() as fake:
-        fake.push("rate_limit", times=3, retry_after=0.01)  # the SDK's 1 + 2 retries, all refused
+        fake.push("server_error", times=3)  # the SDK's 1 + 2 retries, all refused
         result = run_episode(geo_sim, openai(fake), parse_query("Go to the bedroom", geo_sim.scene),
                              EpisodeConfig(max_steps=2), spawn="living_room")
         texts = [r.text for r in fake.requests]
     assert len(texts) == 3 + 1  # step 1: the SDK's attempts only, no re-ask; step 2: one call
     assert result.invalid_decisions == 1
+    assert not any("unavailable" in t or "rejected" in t for t in texts)
+
+
+def test_a_429_is_asked_again_in_its_step_and_never_told_to_the_model(geo_sim) -> None:
+    """Issue 27: a 429 the SDK's retries did not get past is the provider's limit, not a step nor a failure."""
+    with FakeOpenAI() as fake:
+        fake.push("rate_limit", times=3, retry_after=0.01)  # the SDK's 1 + 2 retries, all refused
+        result = run_episode(geo_sim, openai(fake), parse_query("Go to the bedroom", geo_sim.scene),
+                             EpisodeConfig(max_steps=2), spawn="living_room")
+        texts = [r.text for r in fake.requests]
+    assert len(texts) == 3 + result.steps  # step 1: the SDK's refused attempts, then asked again; one call a step
+    assert result.invalid_decisions == 0 and result.outcome != "pilot_error"
     assert not any("rate_limited" in t or "rejected" in t for t in texts)
 
 

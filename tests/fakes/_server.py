@@ -21,10 +21,13 @@ import re
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
+
+from .limits import Usage, Windows
 
 Oracle = Any  # Callable[[RecordedRequest], dict | str]
 
@@ -172,6 +175,8 @@ class FakeServer:
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._host, self._port = host, port
+        self._windows: Windows | None = None
+        self.throttled = 0  # requests answered 429 by the rate limit (`limit`)
         self._httpd: _HTTPServer | None = None
         self._thread: threading.Thread | None = None
 
@@ -227,6 +232,21 @@ class FakeServer:
             for _ in range(times):
                 self._script.append(Action(kind, dict(params)))
         return self
+
+    def limit(self, rpm: int | None = None, tpm: int | None = None,
+              clock: Callable[[], float] = time.monotonic) -> FakeServer:
+        """Enforce requests and tokens per minute as the provider does: its headers on every answer, its 429
+        body beyond the limit (a request's tokens: its input's, as `_usage_counts` counts them)."""
+        self._windows = Windows(rpm, tpm, clock)
+        return self
+
+    def _limit_headers(self, usage: Usage) -> dict[str, str]:
+        """The provider's rate-limit headers (none by default: Gemini sends none)."""
+        return {}
+
+    def _limit_error(self, usage: Usage) -> tuple[str, str]:
+        """The provider's 429 message and code."""
+        return "Resource has been exhausted (e.g. check quota).", "rate_limit_exceeded"
 
     def reset(self) -> None:
         with self._lock:
@@ -303,7 +323,17 @@ class FakeServer:
         if data is None:
             h._reply(400, json.dumps(self._error_body(400, "request body is not JSON", "invalid_request")).encode())
             return
+        usage = self._windows.admit(self._usage_counts(req, "")[0]) if self._windows is not None else None
+        if usage is not None and usage.refused:
+            with self._lock:
+                self.throttled += 1
+            message, code = self._limit_error(usage)
+            headers = {**self._limit_headers(usage), "retry-after": f"{max(1, round(usage.reset_requests_s))}"}
+            h._reply(429, json.dumps(self._error_body(429, message, code)).encode(), headers)
+            return
         status, payload, headers = self._answer(req, action)
+        if usage is not None:
+            headers = {**self._limit_headers(usage), **headers}
         if payload is None:  # hang: the client gave up; close without answering
             h.close_connection = True
             return

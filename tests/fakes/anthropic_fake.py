@@ -9,9 +9,11 @@ does); plain text actions (text, prose, not_json) come back as a text block.
 
 from __future__ import annotations
 
+import datetime
 import uuid
 
 from ._server import FakeServer, RecordedRequest
+from .limits import Usage
 
 _ERROR_TYPES = {400: "invalid_request_error", 401: "authentication_error", 403: "permission_error",
                 404: "not_found_error", 408: "timeout_error", 413: "request_too_large", 429: "rate_limit_error",
@@ -75,6 +77,24 @@ class FakeAnthropic(FakeServer):
             block = {"type": "tool_use", "id": f"toolu_{uuid.uuid4().hex[:20]}", "name": tool, "input": data}
             return self._message(req, [block], "tool_use", text)
         return self._message(req, [{"type": "text", "text": text}], "end_turn", text)
+
+    def _limit_headers(self, usage: Usage) -> dict[str, str]:
+        def at(seconds: float) -> str:  # RFC 3339, as Anthropic sends it
+            moment = datetime.datetime.now(datetime.UTC) + datetime.timedelta(seconds=seconds)
+            return moment.strftime("%Y-%m-%dT%H:%M:%SZ")
+
+        return {"anthropic-ratelimit-requests-limit": str(usage.rpm or 0),
+                "anthropic-ratelimit-requests-remaining": str(usage.left_requests),
+                "anthropic-ratelimit-requests-reset": at(usage.reset_requests_s),
+                "anthropic-ratelimit-tokens-limit": str(usage.tpm or 0),
+                "anthropic-ratelimit-tokens-remaining": str(usage.left_tokens),
+                "anthropic-ratelimit-tokens-reset": at(usage.reset_tokens_s)}
+
+    def _limit_error(self, usage: Usage) -> tuple[str, str]:
+        what = "requests" if usage.refused == "requests" else "input tokens"
+        limit = usage.rpm if usage.refused == "requests" else usage.tpm
+        return (f"This request would exceed the rate limit for your organization of {limit} {what} per minute. "
+                "For details, refer to: https://docs.claude.com/en/api/rate-limits.", "")
 
     def _error_body(self, status: int, message: str, code: str) -> dict:
         kind = _ERROR_TYPES.get(status, "api_error" if status >= 500 else "invalid_request_error")

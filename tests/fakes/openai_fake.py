@@ -13,6 +13,7 @@ import uuid
 from typing import Any
 
 from ._server import FakeServer, RecordedRequest
+from .limits import Usage, go_duration
 
 
 class FakeOpenAI(FakeServer):
@@ -85,6 +86,20 @@ class FakeOpenAI(FakeServer):
 
     def _success(self, req: RecordedRequest, text: str, *, data: dict | None = None) -> dict:
         return self._completion(req, text)
+
+    def _limit_headers(self, usage: Usage) -> dict[str, str]:
+        return {"x-ratelimit-limit-requests": str(usage.rpm or 0), "x-ratelimit-limit-tokens": str(usage.tpm or 0),
+                "x-ratelimit-remaining-requests": str(usage.left_requests),
+                "x-ratelimit-remaining-tokens": str(usage.left_tokens),
+                "x-ratelimit-reset-requests": go_duration(usage.reset_requests_s),
+                "x-ratelimit-reset-tokens": go_duration(usage.reset_tokens_s)}
+
+    def _limit_error(self, usage: Usage) -> tuple[str, str]:
+        what, limit = (("requests per min (RPM)", usage.rpm) if usage.refused == "requests"
+                       else ("tokens per min (TPM)", usage.tpm))
+        return (f"Rate limit reached for gpt-4.1 in organization org-fake on {what}: Limit {limit}, Used {limit}, "
+                f"Requested 1. Please try again in {go_duration(usage.reset_requests_s)}. Visit "
+                "https://platform.openai.com/account/rate-limits to learn more.", "rate_limit_exceeded")
 
     def _error_body(self, status: int, message: str, code: str) -> dict:
         kind = {401: "invalid_request_error", 429: "requests", 400: "invalid_request_error"}.get(

@@ -11,6 +11,7 @@ from vlnpilot.bench.manifest import MANIFEST, read_manifest
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 from vlnpilot.bench.suite import suite_pins
 from vlnpilot.core.ranging import range_sensor
+from vlnpilot.pilots.ratelimit import parse_rate_limit
 
 
 def _checked_sensors(name: str) -> str:
@@ -24,8 +25,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
                   seed: int | None = None, profile: str | None = None, base_url: str | None = None,
                   progress: bool = True, shield: str | None = None, *, episode_options: dict[str, Any] | None = None,
                   render: bool = True, pilot_options: Mapping[str, str] | None = None,
-                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none",
-                  frames: bool | None = None) -> Path:
+                  plugins: Sequence[str] = (), console: Any = None, sensors: str = "none", **more: Any) -> Path:
     """Run (or `resume`) a bench of `suite` x `pilots` and write its tables; returns the bench directory.
 
     `suite`: 'paper' or a YAML file. `pilots`: 'oracle,openai:gpt-4.1' or a list. reps / max_steps / seed /
@@ -39,8 +39,12 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     row's drone that names none itself. A suite may pin its shield and context (the paper suite pins no shield and
     the paper's context): `shield` and `episode_options['context']`, given, win over a pin. `frames`: record each
     step's camera frames, which the report's episode pages show; False writes none and skips the chase camera's
-    render, used by nothing else. None: as the resumed bench recorded them, else True.
+    render, used by nothing else. None: as the resumed bench recorded them, else True. `rate_limit`: 'RPM,TPM',
+    the budget of each provider and model until its rate-limit headers say otherwise (pilots/ratelimit.py). These
+    two come as keywords of `more` (the signature's ceiling, pyproject's max-args, is not raised for them).
     """
+    frames, rate_limit = _more_settings(more)
+    limit = parse_rate_limit(rate_limit)  # a bad value: one line, before anything runs
     if console is None:
         from rich.console import Console
 
@@ -64,7 +68,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         profile=profile, base_url=base_url, pilot_options=dict(pilot_options or {}), executor=executor,
         episode_options=options,
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render and frames,
-        plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors))
+        plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors),
+        rate_limit=f"{limit.rpm:g},{limit.tpm or 0:g}" if limit else None)
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:
@@ -94,6 +99,14 @@ def print_report(report: BenchReport, console: Any) -> None:
     state = "complete" if report.complete else f"{report.finished}/{report.episodes} episodes"
     console.print(f"bench {state} in {report.wall_s:.1f} s ({report.ran} run now); tables: "
                   + ", ".join(str(p) for p in report.tables[:3]), highlight=False)
+
+
+def _more_settings(more: dict[str, Any]) -> tuple[bool | None, str | None]:
+    """`frames` and `rate_limit`, the bench's two keyword-only settings beyond the signature."""
+    unknown = sorted(set(more) - {"frames", "rate_limit"})
+    if unknown:
+        raise TypeError(f"bench_command() got unexpected keyword arguments: {', '.join(unknown)}")
+    return more.get("frames"), more.get("rate_limit")
 
 
 def _with_pins(suite: str | Path, shield: str | None, options: dict[str, Any]) -> dict[str, Any]:

@@ -48,6 +48,8 @@ class EpisodeSpec:
     spawn_jitter_deg: float = 0.0
     sensors: str = "none"  # the range sensors the drone carries (vlnpilot.core.ranging.SENSORS)
     mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict); None: the goal above
+    rate_dir: str | None = None  # the bench's shared rate budgets (pilots/ratelimit.py), where every worker reads
+    rate_limit: str | None = None  # 'RPM,TPM' of --rate-limit, until a provider's headers say otherwise
 
 
 @dataclass(frozen=True)
@@ -146,6 +148,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
+    from vlnpilot.pilots.ratelimit import parse_rate_limit, share_budgets
     from vlnpilot.prompting.render import prompt_hash
     from vlnpilot.tasks.mission import Mission
     from vlnpilot.tasks.task import Task
@@ -154,6 +157,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     # the chase camera is seen only in the recorded frames (the episode pages of the report): without them, not rendered
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors,
                          rear_camera=frames)
+    share_budgets(spec.rate_dir, parse_rate_limit(spec.rate_limit))  # before the pilot: it takes its budget
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean

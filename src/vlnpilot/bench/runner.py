@@ -26,6 +26,7 @@ from typing import Any
 from vlnpilot.bench.episode_job import EpisodeSpec, Event, import_plugins
 from vlnpilot.bench.executors import BenchError, default_workers, executor_factory, make_executor
 from vlnpilot.bench.manifest import FORMAT, MANIFEST, BenchManifest, bench_lock, read_manifest
+from vlnpilot.bench.rate_column import RateColumn
 from vlnpilot.bench.results import RESULTS, PilotSummary, ResultsLog, episode_key, record_key, summarize
 from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dict
 from vlnpilot.bench.tables import render_tables
@@ -62,6 +63,7 @@ class BenchSettings:
     sensors: str = "none"  # range sensors of every row's drone that names none itself (vlnpilot.core.ranging.SENSORS)
     plugins: tuple[str, ...] = ()  # modules to import in every worker (custom pilots registered by name)
     progress: bool = True
+    rate_limit: str | None = None  # 'RPM,TPM' of every provider and model until its headers say (pilots/ratelimit.py)
 
 
 @dataclass
@@ -214,7 +216,8 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
                     render=settings.render, save_frames=settings.save_frames, mission=row.mission,
                     spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg,
-                    sensors=row.sensors or settings.sensors))
+                    sensors=row.sensors or settings.sensors,
+                    rate_dir=str((out / RATE_DIR).resolve()), rate_limit=settings.rate_limit))
     return specs
 
 
@@ -242,6 +245,7 @@ def _in_key_order(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 
 # ------------------------------------------------------------------------------------------------- running
 Printer = Callable[[str], None]
+RATE_DIR = "rate"  # the shared rate budgets of the bench's workers (pilots/ratelimit.py)
 
 
 def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
@@ -338,7 +342,7 @@ def _fly(settings: BenchSettings, flight: _Flight, todo: Sequence[EpisodeSpec], 
             flight.say("hint: model pilots spend most of a step waiting for the model; --workers 16 keeps more "
                        "episodes in flight than there are cores")
         ran, failed = _drive(executor, todo, log, flight.chash, flight.planned, flight.done, settings.progress,
-                             console)
+                             console, flight.out / RATE_DIR)
         return ran, failed, executor.describe
     finally:
         executor.close()
@@ -365,7 +369,7 @@ def _prompt_hash(profile: str) -> str:
 
 
 def _drive(executor: Any, todo: Sequence[EpisodeSpec], log: ResultsLog, chash: str, total: int, done: int,
-           show_progress: bool, console: Any) -> tuple[int, dict[str, str]]:
+           show_progress: bool, console: Any, rate_dir: Path | None = None) -> tuple[int, dict[str, str]]:
     """Consume the executor's events: append finished episodes to the log, show progress, collect failures."""
     from rich.progress import (
         BarColumn,
@@ -381,7 +385,8 @@ def _drive(executor: Any, todo: Sequence[EpisodeSpec], log: ResultsLog, chash: s
     ran = ok = 0
     progress = Progress(TextColumn("[bold]bench"), BarColumn(), MofNCompleteColumn(),
                         TextColumn("ok {task.fields[ok]}  failed {task.fields[failed]}  in flight {task.fields[run]}"),
-                        TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), console=console,
+                        TimeElapsedColumn(), TextColumn("ETA"), TimeRemainingColumn(), RateColumn(rate_dir),
+                        console=console,
                         disable=not show_progress or console is None)
     in_flight = 0
     with progress:

@@ -40,6 +40,13 @@ if TYPE_CHECKING:
     from vlnpilot.episode.config import EpisodeConfig
 
 
+RATE_LIMITED = "rate_limited"
+# A 429 the SDK's retries did not get past is asked again within the same step, with a fresh deadline (the provider
+# answers: it is not hung), up to this many times; the shared rate budget (pilots/ratelimit.py) has by then slowed
+# every worker down. It is recorded with the step's calls, and is neither a step nor a re-ask.
+MAX_RATE_LIMITED_CALLS = 50
+
+
 @dataclass(frozen=True)
 class Answer:
     """One pilot call, parsed and validated. A rejected reply keeps its text and the tokens it cost."""
@@ -171,7 +178,7 @@ class PilotAsker:
         step_end = time.monotonic() + (config.step_deadline_s or 0.0)
         out.ranges = self.sensing.ranges() if self.sensing is not None else ()
         context_lines, in_state = self.context.lines(step, state, out.ranges), self.context.in_state()
-        attempt, reasks = 0, 0
+        attempt, reasks, throttled = 0, 0, 0
         while reasks <= config.max_reasks:
             pin = PilotInput(image=image, query=self.task.query, topological_map=self.topo, state=state,
                              previous_movement=self.previous, step=step, profile=config.profile,
@@ -192,9 +199,13 @@ class PilotAsker:
                 if out.confirmation is not None and decision is not None:
                     out.confirmation["confirmed"] = decision.state == out.confirmation["first"]["state"]
                 return out
-            reasks += 1
             out.failures.append({"attempt": attempt - 1, "reason": answer.error, "kind": answer.kind,
                                  "fatal": answer.fatal, "raw_text": answer.raw_text})
+            if answer.kind == RATE_LIMITED and throttled < MAX_RATE_LIMITED_CALLS:
+                throttled += 1  # the provider's limit, not the pilot's failure: ask again, the same step
+                step_end = time.monotonic() + (config.step_deadline_s or 0.0)
+                continue
+            reasks += 1
             if answer.fatal or answer.kind == "step_deadline" or answer.kind in TRANSIENT_REASONS:
                 break  # re-ask only an unusable answer; a transient failure is the transport's, not the model's
             why = answer.hint or f"{answer.error}. Answer again with valid values."

@@ -36,6 +36,7 @@ from vlnpilot.pilots._history import Conversation, Message, messages
 from vlnpilot.pilots.attempts import AttemptLog, event_hooks
 from vlnpilot.pilots.base import BasePilot, PilotError
 from vlnpilot.pilots.options import ModelOptions
+from vlnpilot.pilots.ratelimit import budget_for
 from vlnpilot.pilots.secrets import redact, scrub
 
 log = logging.getLogger(__name__)
@@ -123,6 +124,7 @@ class ModelPilot(BasePilot):
         self._prices = pricing.load_prices(prices) if isinstance(prices, Path) else prices
         self._gate = CallGate()  # subclasses hook it into their SDK's HTTP client (see cancel_pending)
         self._attempts = AttemptLog()  # every HTTP attempt of a call, through the same hooks (`_event_hooks`)
+        self._budget = budget_for(self.provider, self.model)  # a bench's shared rate budget (pilots/ratelimit.py)
         self.price_known = pricing.find_price(self.model, self._prices) is not None
         if not self.price_known and (self.provider, self.model) not in _UNPRICED_WARNED:
             _UNPRICED_WARNED.add((self.provider, self.model))  # once per model and process, not per pilot
@@ -138,8 +140,20 @@ class ModelPilot(BasePilot):
         return f"{type(self).__name__}(model={self.model!r}, timeout={self.timeout:g})"
 
     def _event_hooks(self) -> dict[str, list[Callable[[Any], None]]]:
-        """The httpx event hooks a subclass gives its SDK client: the call gate, then the attempt log."""
-        return event_hooks(self._gate.on_request, self._attempts)
+        """The httpx event hooks a subclass gives its SDK client: the rate budget's turn (every attempt, the SDK's
+        retries included, waits for it), the call gate, the attempt log; each response adapts the budget."""
+        hooks = event_hooks(self._gate.on_request, self._attempts)
+        budget = self._budget
+        if budget is not None:
+            def wait_turn(request: Any) -> None:
+                budget.acquire()
+
+            def adapt(response: Any) -> None:
+                budget.observe(response.status_code, response.headers)
+
+            hooks["request"].insert(0, wait_turn)
+            hooks["response"].append(adapt)
+        return hooks
 
     def cancel_pending(self) -> None:
         """Abandon the calls in flight: no further HTTP request of theirs (SDK retries included) is sent."""
@@ -218,6 +232,8 @@ class ModelPilot(BasePilot):
 
     def _usage(self, reply: Reply, latency_s: float) -> Usage:
         inp, cached, out = _int(reply.input_tokens), _int(reply.cached_tokens), _int(reply.output_tokens)
+        if self._budget is not None:
+            self._budget.charge(inp + out)
         cost = pricing.cost_usd(self.model, inp, cached, out, cache_write_tokens=_int(reply.cache_write_tokens),
                                 prices=self._prices)
         return Usage(input_tokens=inp, cached_tokens=min(cached, inp), output_tokens=out,
