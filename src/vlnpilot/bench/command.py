@@ -81,8 +81,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         keys = sorted(report.failed)
         shown = "\n  ".join(f"{k}: {report.failed[k].strip().splitlines()[0] if report.failed[k].strip() else '?'}"
                             for k in keys[:5])
-        more = f"\n  ... and {len(keys) - 5} more" if len(keys) > 5 else ""
-        raise BenchError(f"{len(keys)} episode(s) did not finish:\n  {shown}{more}\n"
+        rest = f"\n  ... and {len(keys) - 5} more" if len(keys) > 5 else ""
+        raise BenchError(f"{len(keys)} episode(s) did not finish:\n  {shown}{rest}\n"
                          f"every finished episode is recorded; rerun with --resume --out {report.out} to fly the rest")
     return report.out
 
