@@ -36,6 +36,7 @@ from vlnpilot.core.exits import shorten
 from vlnpilot.core.fileio import write_atomic
 from vlnpilot.core.fsm import PROFILES
 from vlnpilot.core.rundir import check_writable, default_run_dir, git_sha, package_versions
+from vlnpilot.pilots.ratelimit import share_budgets
 
 _FAIL_FAST = 3  # abort when this many episodes failed before any finished: something systemic is wrong
 
@@ -278,6 +279,7 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
             ran, failed, describe = _fly(settings, flight, todo, log, console)
         finally:
             log.close()
+            share_budgets(None)  # an inline bench shared this process's budgets: the pilots after it have none
             tables = write_tables(out)
         records = _in_key_order(r for r in log.read() if episode_key(*record_key(r)) in {s.key for s in specs})
         summaries = [summarize(p.spec, [r for r in records if r["pilot"] == p.spec]) for p in pilots]
