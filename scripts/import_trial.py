@@ -40,6 +40,11 @@ def pilot_memory(given: str | None, summary: dict) -> str:
     return memory
 
 
+def range_sensor_of(summary: dict) -> str:
+    """The range sensor the run's drone carried (`none` for runs recorded before sensors existed)."""
+    return (summary.get("capabilities") or {}).get("range_sensor") or "none"
+
+
 def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, interface: str, scene: str | None,
                  account: Path | None, memory: str | None = None) -> Path:
     summary, _ = load_run(run_dir)
@@ -61,7 +66,7 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         "context": (summary["config"].get("context") or {}).get("preset", "paper"),
         "shield": summary["config"]["shield"],
         "profile": summary["config"]["profile"],
-        "sensors": (summary.get("capabilities") or {}).get("range_sensor") or "none",
+        "sensors": range_sensor_of(summary),
         "outcome": summary["result"]["outcome"],
         "steps": summary["result"]["steps"],
     }
@@ -83,7 +88,7 @@ def write_suite(set_dir: Path) -> Path:
         goal = {"room": task["goal_room"], **({"target": task["goal_target"]} if task["goal_target"] else {})}
         rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], "goal": goal,
                      "scene": trial["scene"]})
-        sensors = (summary.get("capabilities") or {}).get("range_sensor") or "none"
+        sensors = range_sensor_of(summary)
         if sensors != "none":  # the drone it was flown with: a replay must carry the same sensor
             rows[-1]["sensors"] = sensors
         limits.add(summary["config"]["max_steps"])

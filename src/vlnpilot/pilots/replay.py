@@ -75,11 +75,9 @@ class ReplayPilot(BasePilot):
         if flown != scene.name or (mark is not None and mark != scene.fingerprint()):
             raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
                               f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}")
-        recorded = self.summary.get("config", {})
         # What decides the outcome of the same answers (a longer step limit only runs the recording out).
         now = {"profile": config.profile, "shield": config.shield, "context": context_name(config.context)}
-        context = (recorded.get("context") or {}).get("preset", "paper")  # recordings before contexts: paper
-        then = {"profile": recorded.get("profile"), "shield": recorded.get("shield"), "context": context}
+        then = _flown_with(self.summary.get("config", {}))
         differ = [f"--{key.replace('_', '-')} {then[key]}" for key in now
                   if then[key] is not None and str(then[key]) != str(now[key])]
         if differ:
@@ -164,7 +162,11 @@ def recorded_settings(spec: str | None) -> dict[str, str]:
     run_dir = Path(spec.removeprefix("replay:"))
     if not (run_dir / "summary.json").is_file():
         return {}
-    config = load_run(run_dir)[0].get("config", {})
-    settings = {"context": (config.get("context") or {}).get("preset", "paper"), "profile": config.get("profile"),
-                "shield": config.get("shield")}
+    settings = _flown_with(load_run(run_dir)[0].get("config", {}))
     return {key: str(value) for key, value in settings.items() if value}
+
+
+def _flown_with(config: dict[str, Any]) -> dict[str, Any]:
+    """The settings of a recorded run's config that decide its outcome: profile, shield, context (None if unknown)."""
+    context = (config.get("context") or {}).get("preset", "paper")  # recordings before contexts: paper
+    return {"profile": config.get("profile"), "shield": config.get("shield"), "context": context}
