@@ -9,7 +9,7 @@ import threading
 
 import pytest
 
-from fakes import FakeAnthropic, FakeGemini, FakeOpenAI, ServerThread, sample_input
+from fakes import FakeAnthropic, FakeGemini, FakeOpenAI, ServerThread, sample_input, warm_up
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.rundir import Recorder, load_run
 from vlnpilot.episode.config import EpisodeConfig
@@ -142,13 +142,7 @@ def test_abandoned_calls_send_nothing_after_the_episode(geo_sim, provider) -> No
         else:
             key = {"gemini": "AIza-not-a-real-key"}.get(provider, KEY)
             pilot = make_pilot(provider, base_url=fake.base_url, api_key=key, timeout=0.5, max_retries=2)
-        # A first answered call warms the SDK (its lazy imports, the connection), which in a cold process can take
-        # longer than the 0.2 s deadline below and would then send no request at all.
-        fake.push("decision", decision={"room": "living_room", "movement": "C1", "state": "Recognize Room",
-                                        "description": "warm-up", "door_position": "not_visible"})
-        run_episode(geo_sim, pilot, parse_query("Go to the bedroom", geo_sim.scene), EpisodeConfig(max_steps=1),
-                    spawn="living_room")
-        warm = len(fake.requests)
+        warm = warm_up(fake, geo_sim, pilot)  # a cold first call could outlast the 0.2 s deadline below
         fake.push("hang", times=20, seconds=5.0)
         result = run_episode(geo_sim, pilot, parse_query("Go to the bedroom", geo_sim.scene),
                              EpisodeConfig(max_steps=2, step_deadline_s=0.2), spawn="living_room")
@@ -181,7 +175,7 @@ def test_a_huge_valid_reply_is_too_long_not_json_and_is_recorded_capped(geo_sim,
 HANGING_EPISODE = """
 import sys
 sys.path.insert(0, sys.argv[1])
-from fakes import FakeOpenAI
+from fakes import FakeOpenAI, warm_up
 from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
@@ -191,12 +185,7 @@ from vlnpilot.tasks.task import parse_query
 fake = FakeOpenAI().start()  # left running: its hung answers would keep an abandoned call waiting
 pilot = make_pilot("openai:gpt-4.1", base_url=fake.base_url, api_key="sk-not-a-real-key-0000", timeout=300)
 with Simulator("cabin", SimConfig(render=False)) as sim:
-    # one answered call first: the SDK's first request in a fresh process may outlast the 0.2 s deadline
-    fake.push("decision", decision={"room": "living_room", "movement": "C1", "state": "Recognize Room",
-                                    "description": "warm-up", "door_position": "not_visible"})
-    run_episode(sim, pilot, parse_query("Go to the bedroom", sim.scene), EpisodeConfig(max_steps=1),
-                spawn="living_room")
-    warm = len(fake.requests)
+    warm = warm_up(fake, sim, pilot)  # a fresh process's first call could outlast the 0.2 s deadline
     fake.push("hang", times=20, seconds=600.0)
     result = run_episode(sim, pilot, parse_query("Go to the bedroom", sim.scene),
                          EpisodeConfig(max_steps=1, step_deadline_s=0.2), spawn="living_room")

@@ -16,8 +16,10 @@ from .inputs import SAMPLE_MAP, sample_image, sample_input
 from .openai_fake import FakeOpenAI
 from .scripted import DEFAULT_DECISION, ScriptedPilot
 from .uvicorn_thread import ServerThread, free_port
+from .warm import warm_up
 
 __all__ = [
+    "warm_up",
     "ACTIONS", "DEFAULT_DECISION", "SAMPLE_MAP", "FakeAnthropic", "FakeGemini", "FakeOpenAI", "FakeServer",
     "RecordedRequest", "ScriptedPilot", "ServerThread", "auto_decision", "free_port", "sample_image", "sample_input",
 ]
