@@ -28,7 +28,7 @@ GOLDEN_SUITE = {
 
 def golden_records() -> list[dict]:
     o = dict(model="ground-truth", latencies=[0.001, 0.002])
-    g = dict(model="gpt-4.1-2025-04-14", tokens=(1000, 100), cost=0.01, shield="geometry")
+    g = dict(model="gpt-4.1-2025-04-14", tokens=(1000, 100), cost=0.01, shield="geometry", cached=384)
     return [
         bench_record("oracle", "lr-bath", 1, "success", steps=40, spl=0.8, **o),
         bench_record("oracle", "lr-bath", 2, "success", steps=40, spl=0.8, **o),
@@ -58,10 +58,10 @@ Ach. = successes / repetitions finished; Coll. = episodes ended by a collision; 
 
 ## Summary per pilot
 
-| Pilot | Model | Success | 95% CI (Wilson) | SPL | Mean steps | Collisions | Steps exceeded | False successes | Pilot errors | Invalid decisions | Oscillations | Interventions | Tokens in/out | Tokens in/call | Cost (USD) | Latency p50 (s) | Latency p95 (s) |
-| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |
-| oracle | ground-truth | 6/6 (100.0%) | 61.0-100.0% | 0.900 | 20.3 | 0 | 0 | 0 | 0 | 0 | 0 | 0 | 0/0 | 0 | 0.0000 | 0.002 | 0.002 |
-| openai:gpt-4.1 | gpt-4.1-2025-04-14 | 2/5 (40.0%) | 11.8-76.9% | 0.250 | 12.8 | 1 | 1 | 1 | 0 | 1 | 3 | 2 | 5000/500 | 625 | 0.0500 | 1.900 | 2.825 |
+| Pilot | Model | Success | 95% CI (Wilson) | SPL | Mean steps | Collisions | Steps exceeded | False successes | Pilot errors | Invalid decisions | Oscillations | Interventions | Tokens in/out | Cached | Tokens in/call | Cost (USD) | Latency p50 (s) | Latency p95 (s) |
+| --- | --- | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: | ---: |
+| oracle | ground-truth | 6/6 (100.0%) | 61.0-100.0% | 0.900 | 20.3 | 0 | 0 | 0 | 0 | 0 | 0 | 0 | 0/0 | -- | 0 | 0.0000 | 0.002 | 0.002 |
+| openai:gpt-4.1 | gpt-4.1-2025-04-14 | 2/5 (40.0%) | 11.8-76.9% | 0.250 | 12.8 | 1 | 1 | 1 | 0 | 1 | 3 | 2 | 5000/500 | 38.4% | 625 | 0.0500 | 1.900 | 2.825 |
 
 SPL: mean over episodes of success weighted by path length; latency: per pilot call.
 
@@ -121,9 +121,9 @@ openai:gpt-4.1 & 2/5 & 11.8--76.9\\% & 0.250 & 12.8 & 1 & 1 & 1 & 1 & 3 & 2 & 50
 """
 
 GOLDEN_SUMMARY_CSV = """\
-pilot,model,episodes,successes,success_rate,ci95_low,ci95_high,spl,mean_steps,collisions,steps_exceeded,false_successes,pilot_errors,invalid_decisions,oscillations,interventions,input_tokens,output_tokens,cost_usd,pilot_calls,latency_p50_s,latency_p95_s,shield,prompt_hash,git_sha
-oracle,ground-truth,6,6,1.0000,0.6097,1.0000,0.9000,20.33,0,0,0,0,0,0,0,0,0,0.000000,12,0.0015,0.0020,off,abc123,deadbeef
-openai:gpt-4.1,gpt-4.1-2025-04-14,5,2,0.4000,0.1176,0.7693,0.2500,12.80,1,1,1,0,1,3,2,5000,500,0.050000,8,1.9000,2.8250,geometry,abc123,deadbeef
+pilot,model,episodes,successes,success_rate,ci95_low,ci95_high,spl,mean_steps,collisions,steps_exceeded,false_successes,pilot_errors,invalid_decisions,oscillations,interventions,input_tokens,output_tokens,cached_tokens,cost_usd,pilot_calls,latency_p50_s,latency_p95_s,shield,prompt_hash,git_sha
+oracle,ground-truth,6,6,1.0000,0.6097,1.0000,0.9000,20.33,0,0,0,0,0,0,0,0,0,0,0.000000,12,0.0015,0.0020,off,abc123,deadbeef
+openai:gpt-4.1,gpt-4.1-2025-04-14,5,2,0.4000,0.1176,0.7693,0.2500,12.80,1,1,1,0,1,3,2,5000,500,1920,0.050000,8,1.9000,2.8250,geometry,abc123,deadbeef
 """
 
 

@@ -33,9 +33,9 @@ def test_request_shape(fake):
     # cache breakpoints on the stable prefix, none on the image or the step text
     assert body["system"][0]["cache_control"] == {"type": "ephemeral"}
     blocks = body["messages"][0]["content"]
-    assert [b["type"] for b in blocks] == ["text", "text", "image", "text"]
+    assert [b["type"] for b in blocks] == ["text", "text", "text", "image"]  # the image last (issue 27)
     assert [("cache_control" in b) for b in blocks] == [True, True, False, False]
-    assert blocks[2]["source"]["media_type"] == "image/jpeg"
+    assert blocks[3]["source"]["media_type"] == "image/jpeg"
 
 
 def test_cache_off_and_strict_tool(fake):

@@ -32,7 +32,7 @@ def test_request_shape(fake):
     body = fake.last.json
     assert body["model"] == "gpt-4.1-mini"
     assert [m["role"] for m in body["messages"]] == ["system", "user"]
-    image_part = body["messages"][1]["content"][2]
+    image_part = body["messages"][1]["content"][-1]  # the image last (issue 27)
     assert image_part["type"] == "image_url"
     assert image_part["image_url"]["url"].startswith("data:image/jpeg;base64,/9j/")
     assert image_part["image_url"]["detail"] == "low"
@@ -41,14 +41,23 @@ def test_request_shape(fake):
     assert fmt["json_schema"]["name"] == SCHEMA_NAME and fmt["json_schema"]["strict"] is True
     assert fmt["json_schema"]["schema"]["additionalProperties"] is False
     assert body["max_tokens"] == 512  # a custom base_url: the widely supported parameter
+    assert "prompt_cache_key" not in body  # only the official API is sent OpenAI's own parameter
     assert fake.last.headers["authorization"] == f"Bearer {KEY}"
 
 
 def test_official_api_uses_max_completion_tokens():
+    from vlnpilot.prompting.render import build_prompt
+
     pilot = OpenAIPilot(api_key=KEY, detail="high", max_output_tokens=300)
     kwargs = pilot._kwargs(_prompt(), "json_schema")
     assert kwargs["max_completion_tokens"] == 300 and "max_tokens" not in kwargs
-    assert kwargs["messages"][1]["content"][2]["image_url"]["detail"] == "high"
+    assert kwargs["messages"][1]["content"][-1]["image_url"]["detail"] == "high"
+    # one cache key per episode: the same for every step of it, another for another query
+    key = kwargs["prompt_cache_key"]
+    assert key.startswith("vlnpilot-")
+    assert pilot._kwargs(_prompt(), "json_schema")["prompt_cache_key"] == key
+    other = build_prompt(sample_input(query="Find the sofa"))
+    assert pilot._kwargs(other, "json_schema")["prompt_cache_key"] != key
 
 
 def _prompt():

@@ -69,8 +69,8 @@ def test_round_trip_sends_image_schema_and_fills_usage(provider, fake, pilot_fac
     assert req.image_media_types == ["image/jpeg"]
     assert req.images[0][:3] == b"\xff\xd8\xff"
     assert Image.open(io.BytesIO(req.images[0])).size == (64, 48)
-    # cache-friendly order: system apart, then context, state prompt, image, step text
-    assert req.parts == ["text", "text", "image", "text"]
+    # cache-friendly order: system apart, then context, state prompt, step text, the image last (issue 27)
+    assert req.parts == ["text", "text", "text", "image"]
     assert "drone" in req.system.lower()
     assert "Find the red cup" in req.texts[0]
     assert "Current FSM state" in req.texts[-1] and req.current_state == "Search Object"

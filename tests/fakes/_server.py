@@ -28,6 +28,7 @@ from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
 from .limits import Usage, Windows
+from .prompt_cache import PromptCache, Segment
 
 Oracle = Any  # Callable[[RecordedRequest], dict | str]
 
@@ -54,6 +55,8 @@ class RecordedRequest:
     image_media_types: list[str] = field(default_factory=list)
     schema: dict | None = None  # the answer schema the client asked for (None in plain JSON mode)
     parts: list[str] = field(default_factory=list)  # kinds of the user parts in order: "text" / "image"
+    cached_tokens: int = 0  # what the answer reported as read from the prompt cache
+    cache_written: int = 0  # and as written to it (Anthropic)
 
     @property
     def text(self) -> str:
@@ -169,7 +172,8 @@ class FakeServer:
         # With rendezvous=N, normal answers wait until N requests are in flight at once (a 500 after 10 s
         # otherwise): a test of concurrent clients then needs no wall-clock bound.
         self._rendezvous = threading.Barrier(rendezvous) if rendezvous else None
-        self.cached_tokens = cached_tokens
+        self.cached_tokens = cached_tokens  # a fixed count (the older tests); 0: the prompt cache decides
+        self.prompt_cache = self._prompt_cache()  # tests may set its clock
         self.requests: list[RecordedRequest] = []
         self._script: deque[Action] = deque()
         self._lock = threading.Lock()
@@ -281,10 +285,29 @@ class FakeServer:
         """refusal / truncated / content_filter / bad_key / reject_schema in the provider's shape."""
         raise NotImplementedError
 
+    def _prompt_cache(self) -> PromptCache:
+        """The provider's prompt cache (OpenAI's by default)."""
+        return PromptCache()
+
+    def _cache_segments(self, req: RecordedRequest) -> list[Segment]:
+        """The request's segments in the order the provider caches them (none: nothing is ever cached)."""
+        return []
+
     # ---------------------------------------------------------------- helpers for the hooks
+    def _input_tokens(self, req: RecordedRequest) -> int:
+        return max(1, sum(len(t) for t in [req.system, *req.texts]) // 4) + 85 * len(req.images)
+
     def _usage_counts(self, req: RecordedRequest, text: str) -> tuple[int, int, int]:
-        inp = max(1, sum(len(t) for t in [req.system, *req.texts]) // 4) + 85 * len(req.images)
-        return inp, min(self.cached_tokens, inp), max(1, len(text) // 4)
+        """(input, cached, output) tokens of an answer; the cache writes go to `req.cache_written`. Call once an
+        answer: it serves the request from the prompt cache, and remembers its prefixes."""
+        inp = self._input_tokens(req)
+        if self.cached_tokens:
+            read, written = self.cached_tokens, 0
+        else:
+            read, written = self.prompt_cache.serve(self._cache_segments(req))
+        req.cached_tokens = min(read, inp)
+        req.cache_written = min(written, inp - req.cached_tokens)
+        return inp, req.cached_tokens, max(1, len(text) // 4)
 
     @staticmethod
     def _b64(data: str) -> bytes:
@@ -323,7 +346,7 @@ class FakeServer:
         if data is None:
             h._reply(400, json.dumps(self._error_body(400, "request body is not JSON", "invalid_request")).encode())
             return
-        usage = self._windows.admit(self._usage_counts(req, "")[0]) if self._windows is not None else None
+        usage = self._windows.admit(self._input_tokens(req)) if self._windows is not None else None
         if usage is not None and usage.refused:
             with self._lock:
                 self.throttled += 1

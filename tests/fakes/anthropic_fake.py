@@ -10,10 +10,12 @@ does); plain text actions (text, prose, not_json) come back as a text block.
 from __future__ import annotations
 
 import datetime
+import json
 import uuid
 
 from ._server import FakeServer, RecordedRequest
 from .limits import Usage
+from .prompt_cache import PromptCache, Segment, text_tokens
 
 _ERROR_TYPES = {400: "invalid_request_error", 401: "authentication_error", 403: "permission_error",
                 404: "not_found_error", 408: "timeout_error", 413: "request_too_large", 429: "rate_limit_error",
@@ -49,6 +51,27 @@ class FakeAnthropic(FakeServer):
         if forced is not None:
             req.schema = forced.get("input_schema")
 
+    def _prompt_cache(self) -> PromptCache:
+        return PromptCache(breakpoints_only=True)  # only where cache_control marks a breakpoint
+
+    def _cache_segments(self, req: RecordedRequest) -> list[Segment]:
+        """Anthropic's order: the tools, the system blocks, then the messages' blocks."""
+        body = req.json or {}
+        tools = json.dumps(body.get("tools") or [], sort_keys=True)
+        out = [Segment(tools, 0)]  # keys the prefix; the fakes bill only the messages
+        system = body.get("system") or []
+        blocks = [{"type": "text", "text": system}] if isinstance(system, str) else list(system)
+        for message in body.get("messages") or []:
+            content = message.get("content")
+            blocks += [{"type": "text", "text": content}] if isinstance(content, str) else list(content or [])
+        for block in blocks:
+            mark = bool(block.get("cache_control"))
+            if block.get("type") == "text":
+                out.append(Segment(block.get("text", ""), text_tokens(block.get("text", "")), mark))
+            else:
+                out.append(Segment(json.dumps(block, sort_keys=True), 85, mark))
+        return out
+
     def _tool_name(self, req: RecordedRequest) -> str | None:
         body = req.json or {}
         choice = body.get("tool_choice") or {}
@@ -67,8 +90,8 @@ class FakeAnthropic(FakeServer):
             "content": content,
             "stop_reason": stop,
             "stop_sequence": None,
-            "usage": {"input_tokens": inp - cached, "output_tokens": out, "cache_read_input_tokens": cached,
-                      "cache_creation_input_tokens": 0},
+            "usage": {"input_tokens": inp - cached - req.cache_written, "output_tokens": out,
+                      "cache_read_input_tokens": cached, "cache_creation_input_tokens": req.cache_written},
         }
 
     def _success(self, req: RecordedRequest, text: str, *, data: dict | None = None) -> dict:

@@ -10,11 +10,13 @@ also a Retry-After header.
 
 from __future__ import annotations
 
+import json
 import re
 import uuid
 from typing import Any
 
 from ._server import FakeServer, RecordedRequest
+from .prompt_cache import Segment, text_tokens
 
 _ROUTE = re.compile(r"^/v1(?:beta|alpha)?/models/([^/:]+):generateContent$")
 _STATUS = {400: "INVALID_ARGUMENT", 401: "UNAUTHENTICATED", 403: "PERMISSION_DENIED", 404: "NOT_FOUND",
@@ -46,6 +48,18 @@ class FakeGemini(FakeServer):
         config = body.get("generationConfig") or body.get("generation_config") or {}
         req.schema = config.get("responseJsonSchema") or config.get("response_json_schema") \
             or config.get("responseSchema") or config.get("response_schema")
+
+    def _cache_segments(self, req: RecordedRequest) -> list[Segment]:
+        """Implicit caching: the system instruction and the generation config, then the contents' parts."""
+        body = req.json or {}
+        head = json.dumps({k: body.get(k) for k in ("systemInstruction", "generationConfig", "tools")}, sort_keys=True)
+        out = [Segment(head, text_tokens(req.system))]
+        for content in body.get("contents") or []:
+            for part in content.get("parts") or []:
+                text = part.get("text")
+                out.append(Segment(text, text_tokens(text)) if text is not None else
+                           Segment(json.dumps(part, sort_keys=True), 85))
+        return out
 
     def _answer(self, req: RecordedRequest, action: Any) -> tuple[int, Any, dict]:
         status, body, headers = super()._answer(req, action)

@@ -8,12 +8,14 @@
 
 from __future__ import annotations
 
+import json
 import time
 import uuid
 from typing import Any
 
 from ._server import FakeServer, RecordedRequest
 from .limits import Usage, go_duration
+from .prompt_cache import PromptCache, Segment, text_tokens
 
 
 class FakeOpenAI(FakeServer):
@@ -86,6 +88,24 @@ class FakeOpenAI(FakeServer):
 
     def _success(self, req: RecordedRequest, text: str, *, data: dict | None = None) -> dict:
         return self._completion(req, text)
+
+    def _prompt_cache(self) -> PromptCache:
+        return PromptCache(step=128)  # cached_tokens come in steps of 128 beyond the first 1,024
+
+    def _cache_segments(self, req: RecordedRequest) -> list[Segment]:
+        """The structured-output schema first (OpenAI serves it as a prefix of the system message), then each
+        message's parts."""
+        body = req.json or {}
+        fmt = json.dumps(body.get("response_format") or {}, sort_keys=True)
+        out = [Segment(fmt, 0)]  # keys the prefix; the fakes bill only the messages
+        for message in body.get("messages") or []:
+            content = message.get("content")
+            for part in [{"type": "text", "text": content}] if isinstance(content, str) else content or []:
+                if part.get("type") == "text":
+                    out.append(Segment(part.get("text", ""), text_tokens(part.get("text", ""))))
+                else:
+                    out.append(Segment(json.dumps(part, sort_keys=True), 85))
+        return out
 
     def _limit_headers(self, usage: Usage) -> dict[str, str]:
         return {"x-ratelimit-limit-requests": str(usage.rpm or 0), "x-ratelimit-limit-tokens": str(usage.tpm or 0),

@@ -200,6 +200,7 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         invalid_decisions: int
         oscillations: int
         input_tokens: int
+        cached_tokens: int
         output_tokens: int
         cost_usd: float
         pilot_calls: int

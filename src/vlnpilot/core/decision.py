@@ -40,9 +40,10 @@ class Usage(BaseModel):
     """Token usage of one model call as the API reports it, and its wall-clock latency."""
 
     model_config = ConfigDict(frozen=True)
-    input_tokens: int = 0
-    cached_tokens: int = 0
+    input_tokens: int = 0  # every prompt token, cached ones and cache writes included
+    cached_tokens: int = 0  # read from the provider's prompt cache (OpenAI, Gemini, Anthropic's cache reads)
     output_tokens: int = 0
+    cache_write_tokens: int = 0  # written to the cache (Anthropic's cache_creation_input_tokens; others: 0)
     latency_s: float = 0.0
     cost_usd: float = 0.0
     priced: bool = True  # False when the model is missing from the price table (cost then reads 0)

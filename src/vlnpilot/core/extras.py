@@ -23,6 +23,7 @@ EXTRA_MODULES: dict[str, tuple[str, ...]] = {
     "report": ("matplotlib", "jinja2", "av"),
     "tello": ("djitellopy", "av"),
     "ray": ("ray",),
+    "tokens": ("bpe_openai",),
 }
 
 

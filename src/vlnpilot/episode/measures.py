@@ -241,6 +241,11 @@ def _tokens(s: Any) -> str:
     return f"{s.input_tokens}/{s.output_tokens}"
 
 
+def _cached_share(s: Any) -> str:
+    """The share of the input tokens the providers served from their prompt caches (as each API reports it)."""
+    return f"{s.cached_tokens / s.input_tokens:.1%}" if s.input_tokens else "--"
+
+
 def _tokens_per_call(s: Any) -> str:
     """Input tokens per pilot call: what a step's prompt costs (the `history` option's earlier turns included)."""
     return f"{s.input_tokens / s.pilot_calls:.0f}" if s.pilot_calls else "--"
@@ -254,10 +259,14 @@ class PilotUsage:
         ResultField("input_tokens", int), ResultField("cached_tokens", int), ResultField("output_tokens", int),
         ResultField("cost_usd", float), ResultField("latency_s_total", float), ResultField("pilot_calls", int))
     aggregates: ClassVar[tuple[Aggregate, ...]] = (
-        Total("input_tokens"), Total("output_tokens"), Total("cost_usd", float), Total("pilot_calls"))
+        Total("input_tokens"), Total("cached_tokens", absent=0), Total("output_tokens"), Total("cost_usd", float),
+        Total("pilot_calls"))
     columns: ClassVar[tuple[Column, ...]] = (
         Column(140, "Tokens in/out", "Tokens in/out", ("input_tokens", "output_tokens"), _tokens,
                lambda s: (s.input_tokens, s.output_tokens)),
+        # only where a pilot sent tokens (the oracle's tables stay as they were)
+        Column(142, "Cached", None, ("cached_tokens",), _cached_share, lambda s: (s.cached_tokens,),
+               when=lambda s: s.input_tokens > 0),
         Column(145, "Tokens in/call", None, (), _tokens_per_call, lambda s: ()),
         column("cost_usd", md="Cost (USD)", tex="Cost (\\$)", fmt=".4f", csv_fmt=".6f", rank=150),
         column("pilot_calls", md=None, tex=None, rank=160))

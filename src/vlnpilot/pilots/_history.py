@@ -127,7 +127,7 @@ def messages(pilot_input: PilotInput, earlier: Sequence[EarlierTurn], *, jpeg_qu
 
 
 def single(prompt: Prompt) -> list[Message]:
-    """This step's message alone (no history): the context, the state prompt, the image and the step text."""
+    """This step's message alone (no history): the context, the state prompt, the step text and the image."""
     if not prompt.image_jpeg:  # the planning call (pilots/planning.py): no image and no state prompt
         return [Message("user", tuple(Part(text=t) for t in (prompt.context, prompt.state_prompt, prompt.step_text)
                                       if t))]
@@ -136,13 +136,15 @@ def single(prompt: Prompt) -> list[Message]:
 
 def _user(context: str | None, state_prompt: str, previous_state_prompt: str | None, jpeg: bytes | None,
           step_text: str, step: int, *, current: bool) -> Message:
-    """A step's user message: stable parts first (the cache marks end the context and the current state prompt)."""
+    """A step's user message: stable parts first (the cache marks end the context and the current state prompt), then
+    the step's text, then its image."""
     parts: list[Part] = []
     if context is not None:
         parts.append(Part(text=context, cache=True))
     if state_prompt != previous_state_prompt:
         parts.append(Part(text=state_prompt, cache=current))
+    parts.append(Part(text=step_text))
+    # the image last: everything before it is text that the next call may begin with (issue 27)
     parts.append(Part(jpeg=jpeg) if jpeg is not None else
                  Part(text=f"(The front camera image of step {step} is not sent again.)"))
-    parts.append(Part(text=step_text))
     return Message("user", tuple(parts))

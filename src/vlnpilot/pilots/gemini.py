@@ -159,7 +159,7 @@ class GeminiPilot(ModelPilot):
         return types.GenerateContentConfig(**config)
 
     def _contents(self, prompt: Any, chat: Sequence[Message] | None = None) -> list[types.Content]:
-        # Stable parts first (implicit caching keys on the prefix): earlier turns, then the image and the step text.
+        # Stable parts first (implicit caching keys on the prefix): earlier turns, then the step text, the image last.
         return [types.Content(role="model" if m.role == "assistant" else "user", parts=[
             types.Part.from_text(text=p.text or "") if p.jpeg is None else
             types.Part.from_bytes(data=p.jpeg, mime_type="image/jpeg") for p in m.parts])

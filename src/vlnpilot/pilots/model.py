@@ -234,9 +234,10 @@ class ModelPilot(BasePilot):
         inp, cached, out = _int(reply.input_tokens), _int(reply.cached_tokens), _int(reply.output_tokens)
         if self._budget is not None:
             self._budget.charge(inp + out)
-        cost = pricing.cost_usd(self.model, inp, cached, out, cache_write_tokens=_int(reply.cache_write_tokens),
-                                prices=self._prices)
-        return Usage(input_tokens=inp, cached_tokens=min(cached, inp), output_tokens=out,
+        cached = min(cached, inp)
+        written = min(_int(reply.cache_write_tokens), inp - cached)
+        cost = pricing.cost_usd(self.model, inp, cached, out, cache_write_tokens=written, prices=self._prices)
+        return Usage(input_tokens=inp, cached_tokens=cached, output_tokens=out, cache_write_tokens=written,
                      latency_s=round(latency_s, 4), cost_usd=cost.usd, priced=self.price_known,
                      attempts=self._attempts.end())
 

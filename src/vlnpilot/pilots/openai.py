@@ -70,7 +70,7 @@ class OpenAIPilot(ModelPilot):
         o = OpenAIOptions.build(self.name, model=model, **options)
         super().__init__(o)
         self.base_url = o.base_url or os.environ.get("OPENAI_BASE_URL") or None
-        official = is_official(self.base_url)
+        self.official = official = is_official(self.base_url)
         if not official:
             self.provider = "OpenAI-compatible"
         # A local server needs no key; the official API does (a missing key is fatal and names the env var).
@@ -90,7 +90,8 @@ class OpenAIPilot(ModelPilot):
 
     # ------------------------------------------------------------ request
     def _messages(self, prompt: Any, chat: Sequence[Message] | None = None) -> list[dict[str, Any]]:
-        # Stable parts first: OpenAI and vLLM prefix caches hit on system + context + state prompt (+ earlier turns).
+        # Stable parts first: OpenAI and vLLM prefix caches hit on system + context + state prompt (+ earlier turns);
+        # the step text, then the image last (pilots/_history.py).
         out: list[dict[str, Any]] = [{"role": "system", "content": prompt.system}]
         for message in single(prompt) if chat is None else chat:
             if message.role == "assistant":
@@ -115,6 +116,8 @@ class OpenAIPilot(ModelPilot):
                 "name": SCHEMA_NAME, "strict": True, "schema": prompt.schema}}
         elif fmt == "json_object":
             kwargs["response_format"] = {"type": "json_object"}
+        if self.official:  # routes an episode's calls to the same cache (a server of another kind may refuse it)
+            kwargs["prompt_cache_key"] = cache_key(prompt)
         if self.extra_body:
             kwargs["extra_body"] = self.extra_body
         return kwargs
@@ -148,6 +151,13 @@ def _rejects_format(exc: BaseException) -> bool:
         return param.startswith("response_format")
     text = f"{getattr(exc, 'message', '')} {body or ''}".lower()
     return any(hint in text for hint in _FORMAT_PARAMS)
+
+
+def cache_key(prompt: Any) -> str:
+    """OpenAI's `prompt_cache_key` of a call: one per episode (its system prompt and context: query and map)."""
+    import hashlib
+
+    return "vlnpilot-" + hashlib.sha256(f"{prompt.system}\0{prompt.context}".encode()).hexdigest()[:16]
 
 
 def is_official(base_url: str | None) -> bool:

@@ -363,13 +363,17 @@ def decision_schema(state: State, profile: str = "paper", rooms: Sequence[str] |
     return {"type": "object", "properties": properties, "required": list(FIELDS), "additionalProperties": False}
 
 
+MESSAGE_LAYOUT = "system; user: context, state prompt, step text, image"  # image last since issue 27
+
+
 def prompt_hash(profile: str = "paper") -> str:
     """A short sha256 of every prompt text rendered for every asked state of a profile: run provenance."""
     if profile not in PROFILES:
         raise UnknownNameError("FSM profile", profile, PROFILES)
     h = hashlib.sha256()
     sample_map = {"edges": [{"from": "a", "to": "b"}], "nodes": [{"id": "a", "name": "A"}, {"id": "b", "name": "B"}]}
-    parts = [system_prompt(), _context("query", sample_map)]
+    # the order a model pilot sends them in (pilots/_history.py): a change of it changes what a pilot sees
+    parts = [MESSAGE_LAYOUT, system_prompt(), _context("query", sample_map)]
     for state in ASKED_STATES:
         parts += [render_state_prompt(state, profile),
                   _step_text(state, "A1", 1, ("feedback",), ("context",), "in state")]
