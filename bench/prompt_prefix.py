@@ -7,9 +7,10 @@ low, json_schema, no history) and, against the previous call of the same episode
 none and is left out), prints the median and max of
 - (a) text tokens outside the prefix the two calls share,
 - (b) the shared prefix's share of the call's input (images at 85 tokens, detail low),
-over the messages (the acceptance, on the medians as the issue measures: (a) <= 1,200 and (b) >= 60 %; the max of
-(a) is printed against 1,200 too: a step that enters a state sends that state's prompt anew), and again with the structured-output schema in
-front, where OpenAI serves it (the schema is per state, so a step that changes state shares nothing there).
+over the messages (the acceptance, on the medians as the issue measures: (a) <= 1,200 and (b) >= 60 %; the max
+of (a) is printed against 1,200 too: a step that enters a state sends that state's prompt anew), and again with the
+structured-output schema in front, where OpenAI serves it (the schema is per state: a step that changes state
+shares nothing there).
 Exit code 1 if the acceptance is not met. `--smoke`: two episodes.
 
     .venv/bin/python bench/prompt_prefix.py [--trials trials/after-plus] [--smoke]

@@ -32,7 +32,9 @@ def encoding() -> Any:
         import bpe_openai
     with warnings.catch_warnings():  # bpe-openai 0.1.4 reads its ranks with importlib.resources.open_binary
         warnings.simplefilter("ignore", DeprecationWarning)
-        return bpe_openai.get_encoding(ENCODING)
+        found = bpe_openai.get_encoding(ENCODING)
+        found.encode("ranks")  # they load on first use
+    return found
 
 
 def encode(text: str) -> list[int]:
