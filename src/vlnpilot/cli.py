@@ -407,7 +407,10 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
               "take, shared by every worker, until the provider's rate-limit headers say otherwise.")] = None,
           plugin: Annotated[list[str] | None, typer.Option(
               "--plugin", help="A module to import first, in every worker too: it may register pilots, "
-              "executors and shields. Repeatable.")] = None) -> None:
+              "executors and shields. Repeatable.")] = None,
+          estimate: Annotated[bool, typer.Option(
+              "--estimate", help="Print the estimated calls, tokens, cached share and cost of each pilot, counted "
+              "offline, and exit without flying.")] = False) -> None:
     """Run a benchmark suite (default: the paper's Table 4) for one or more pilots; write tables and a report.
 
     Exit code 0 when every episode was flown to an outcome, 3 when any ended in pilot_error, 2 for bad input."""
@@ -424,6 +427,12 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     options["context"] = context or pinned_context or DEFAULT_CONTEXT
+    if estimate:
+        from vlnpilot.bench.estimate import estimate_command
+
+        estimate_command(suite, pilots, reps=reps, max_steps=max_steps, profile=profile, context=options["context"],
+                         console=console)
+        raise typer.Exit(0)
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=check_base_url(base_url),

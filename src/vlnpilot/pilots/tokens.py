@@ -28,10 +28,11 @@ LOW_DETAIL_IMAGE_TOKENS = 85  # an image sent with detail="low" (the OpenAI pilo
 @cache
 def encoding() -> Any:
     """The o200k encoding (from the wheel: no download)."""
-    with needs("tokens", what="counting tokens offline"):
-        import bpe_openai
-    with warnings.catch_warnings():  # bpe-openai 0.1.4 reads its ranks with importlib.resources.open_binary
+    # bpe-openai 0.1.4 reads its ranks (on import, and on first use) with importlib.resources.open_binary
+    with needs("tokens", what="counting tokens offline"), warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
+        import bpe_openai
+
         found = bpe_openai.get_encoding(ENCODING)
         found.encode("ranks")  # they load on first use
     return found
