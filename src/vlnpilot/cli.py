@@ -378,7 +378,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 
 
 @app.command("bench")
-def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",
+def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",  # noqa: PLR0913 - one parameter per flag (Typer)
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,

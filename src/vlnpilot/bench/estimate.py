@@ -88,8 +88,8 @@ def _step_text_inputs(context: str, max_steps: int, step: int, state: State) -> 
 
 def row_calls(row: Any, suite: Any, *, max_steps: int, profile: str, context: str) -> RowCalls:
     """The calls of one episode of `row`, and the o200k tokens of a call (text, cacheable prefix)."""
-    from vlnpilot.prompting.render import build_prompt
     from vlnpilot.pilots.tokens import encode
+    from vlnpilot.prompting.render import build_prompt
     from vlnpilot.scene import load_scene
     from vlnpilot.tasks.mission import Mission, stage_shortest_paths
     from vlnpilot.tasks.task import shortest_path_length
