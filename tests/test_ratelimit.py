@@ -123,6 +123,21 @@ def test_two_workers_share_one_budget_through_the_file(tmp_path, clock):
     assert two.snapshot()["rate_rpm"] == 30 and two.snapshot()["throttled"] == 1
 
 
+def test_a_retry_after_pauses_every_worker_of_the_budget(tmp_path, clock):
+    """One worker's 429 says Retry-After: 20; the other worker, which was not refused, waits for it as well."""
+    path = tmp_path / "rate" / "OpenAI-gpt-4.1.json"
+    refused, other = (RateBudget(path, RateLimit(600, None), clock, clock.sleep) for _ in range(2))
+    refused.acquire()
+    refused.observe(429, {"retry-after": "20"})
+    assert other.acquire() == pytest.approx(20.0)  # not the bucket's 0.2 s at the halved 300 rpm
+    clock.now += 60.0
+    assert other.acquire() == 0.0  # the pause is over
+    refused.observe(429, {"retry-after-ms": "1500"})
+    assert other.acquire() == pytest.approx(1.5)
+    refused.observe(429, {})  # no Retry-After: only the back-off, no pause
+    assert other.acquire() < 1.0
+
+
 # ------------------------------------------------------------------ the SDKs against limiting fakes
 @pytest.mark.parametrize("fake_cls, spec, key", [(FakeOpenAI, "openai:gpt-4.1", "sk-test"),
                                                  (FakeAnthropic, "anthropic:claude-sonnet-4-6", "sk-ant-test")])

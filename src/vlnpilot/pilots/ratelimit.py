@@ -3,7 +3,7 @@
 Every HTTP attempt of a model pilot takes one request from the budget before it leaves (the httpx request hook,
 so the SDK's own retries wait too), and its response adapts the budget: the providers' rate-limit headers set
 the limit (OpenAI `x-ratelimit-*`, Anthropic `anthropic-ratelimit-*`), a 429 halves the allowed rate
-(multiplicative decrease), a success raises it by a step (additive increase) up to the limit. Without headers the
+(multiplicative decrease) and its Retry-After pauses the whole budget, every worker's, until then; a success raises it by a step (additive increase) up to the limit. Without headers the
 limit is the bench's `--rate-limit RPM,TPM`; without either a budget grants at once until the first 429.
 
 The workers share it through one small JSON state file per provider and model in the bench directory, read and
@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from vlnpilot.core.errors import ConfigError
+from vlnpilot.pilots.transport import parse_retry_after
 
 WINDOW_S = 60.0  # the providers' limits are per minute
 BURST_S = 1.0  # a full bucket holds one second of the allowed rate (at least one request)
@@ -184,6 +185,7 @@ class RateBudget:
                 _learn(state, limits, now)
             if status == 429:
                 _back_off(state, now)
+                _pause(state, now, parse_retry_after(headers))
             elif 200 <= status < 300:
                 _grow(state)
 
@@ -266,6 +268,13 @@ def _back_off(state: dict[str, Any], now: float) -> None:
     floor = min(MIN_RPM, 0.1 * state["limit_rpm"]) if state["limit_rpm"] else MIN_RPM
     state["rate_rpm"] = max(floor, current * DECREASE)
     state["bucket"] = min(state["bucket"], 0.0)
+
+
+def _pause(state: dict[str, Any], now: float, retry_after_s: float | None) -> None:
+    """A 429's Retry-After closes the whole budget until then: every worker that shares it waits, not only the one
+    that was refused (which its SDK retries after the same delay)."""
+    if retry_after_s:
+        state["closed_until"] = max(state.get("closed_until", 0.0), now + retry_after_s)
 
 
 def _grow(state: dict[str, Any]) -> None:
