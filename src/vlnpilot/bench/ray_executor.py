@@ -1,4 +1,5 @@
-"""The Ray executor: the bench's episodes as Ray actor calls (pip install 'vln-pilot[ray]')."""
+"""The Ray executor: the bench's episodes as Ray actor calls (pip install 'vln-pilot[ray]'). The bench's rate budgets
+live in one more actor on the driver's node (pilots/ratelimit_ray.py), so the workers need no shared filesystem."""
 
 from __future__ import annotations
 
@@ -6,6 +7,7 @@ import contextlib
 import os
 import socket
 from collections.abc import Iterator, Sequence
+from dataclasses import replace
 from typing import Any
 
 from vlnpilot.bench.episode_job import EpisodeSpec, Event, SimulatorCache, import_plugins, run_guarded
@@ -39,6 +41,20 @@ class RayExecutor:
     def run(self, specs: Sequence[EpisodeSpec]) -> Iterator[Event]:
         if not specs:
             return
+        keeper = None
+        if specs[0].rate_dir:  # the rate budgets in one actor on this node: the workers need no shared filesystem
+            from vlnpilot.pilots.ratelimit_ray import start_keeper
+
+            address, keeper = start_keeper(specs[0].rate_dir, specs[0].rate_limit)
+            specs = [replace(spec, rate_dir=address) for spec in specs]
+        try:
+            yield from self._run(specs)
+        finally:
+            if keeper is not None:
+                with contextlib.suppress(Exception):
+                    self._ray.kill(keeper)
+
+    def _run(self, specs: Sequence[EpisodeSpec]) -> Iterator[Event]:
         ray = self._ray
         plan = split_workers(min(self.workers, len(specs)), len(self.plan))
         actor_cls = ray.remote(num_cpus=1)(_RayWorker)

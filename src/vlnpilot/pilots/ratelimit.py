@@ -3,12 +3,15 @@
 Every HTTP attempt of a model pilot takes one request from the budget before it leaves (the httpx request hook,
 so the SDK's own retries wait too), and its response adapts the budget: the providers' rate-limit headers set
 the limit (OpenAI `x-ratelimit-*`, Anthropic `anthropic-ratelimit-*`), a 429 halves the allowed rate
-(multiplicative decrease) and its Retry-After pauses the whole budget, every worker's, until then; a success raises it by a step (additive increase) up to the limit. Without headers the
-limit is the bench's `--rate-limit RPM,TPM`; without either a budget grants at once until the first 429.
+(multiplicative decrease) and its Retry-After pauses the whole budget, every worker's, until then; a success raises
+it by a step (additive increase) up to the limit. Without headers the limit is the bench's `--rate-limit RPM,TPM`;
+without either a budget grants at once until the first 429.
 
 The workers share it through one small JSON state file per provider and model in the bench directory, read and
 written under `fcntl.flock`: processes of the local executor and Ray workers on one machine (or on a shared
-filesystem) see one budget, a crashed worker leaves no lock held, and nothing else has to run.
+filesystem) see one budget, a crashed worker leaves no lock held, and nothing else has to run. A Ray cluster without
+a shared filesystem reaches the same budgets through one Ray actor on the driver's node (`ratelimit_ray.py`): its
+address, `ray-actor:NAME`, stands where the directory would.
 """
 
 from __future__ import annotations
@@ -165,15 +168,12 @@ class RateBudget:
     # -- the three events
     def acquire(self) -> float:
         """Wait for a request of the budget (and a non-negative token balance); the seconds waited."""
-        waited = 0.0
-        while True:
-            with self._state() as state:
-                wait = _take(state, self.clock())
-            if wait <= 0:
-                return waited
-            wait = min(wait, MAX_WAIT_S)
-            self.sleep(wait)
-            waited += wait
+        return wait_for(self.try_take, self.sleep)
+
+    def try_take(self) -> float:
+        """Take a request if the budget allows now (0.0), else the seconds until it will (nothing taken)."""
+        with self._state() as state:
+            return _take(state, self.clock())
 
     def observe(self, status: int, headers: Mapping[str, str] | Any) -> None:
         """A response came: learn the limits from its headers; a 429 backs off, a success grows the rate."""
@@ -198,6 +198,18 @@ class RateBudget:
             if state["limit_tpm"]:
                 _refill(state, self.clock())
                 state["tokens"] -= tokens
+
+
+def wait_for(try_take: Callable[[], float], sleep: Callable[[float], None]) -> float:
+    """Try until a request is granted, sleeping at most MAX_WAIT_S at a time; the seconds waited."""
+    waited = 0.0
+    while True:
+        wait = try_take()
+        if wait <= 0:
+            return waited
+        wait = min(wait, MAX_WAIT_S)
+        sleep(wait)
+        waited += wait
 
 
 def _token_rate(state: dict[str, Any]) -> float | None:
@@ -292,22 +304,35 @@ _shared: dict[str, Any] = {"directory": None, "default": None, "budgets": {}, "c
 _shared_lock = threading.Lock()
 
 
+RAY_ACTOR = "ray-actor:"  # a budget address that names the Ray actor holding the budgets (ratelimit_ray.py)
+NAMESPACE = "vlnpilot"  # named actors are found by name within a namespace; the workers' jobs share this one
+
+
 def share_budgets(directory: str | Path | None, default: RateLimit | None = None,
                   clock: Callable[[], float] = time.time, sleep: Callable[[float], None] = time.sleep) -> None:
-    """Give this process's model pilots the budgets in `directory` (a bench's `rate/`); None: no budgets."""
-    settings = {"directory": Path(directory) if directory else None, "default": default, "clock": clock,
-                "sleep": sleep}
+    """Give this process's model pilots the budgets in `directory` (a bench's `rate/`, or `ray-actor:NAME`); None:
+    no budgets."""
+    where = directory if isinstance(directory, str) and directory.startswith(RAY_ACTOR) else \
+        Path(directory) if directory else None
+    settings = {"directory": where, "default": default, "clock": clock, "sleep": sleep}
     with _shared_lock:
         if any(_shared[k] != v for k, v in settings.items()):  # a worker's next episode of the same bench: kept
             _shared.update(settings, budgets={})
 
 
-def budget_for(provider: str, model: str) -> RateBudget | None:
-    """The shared budget of a provider and model, or None when this process runs no bench with budgets."""
+def budget_for(provider: str, model: str) -> RateBudget | Any | None:
+    """The shared budget of a provider and model (a `RateBudget`, or a `RayBudget` with the same methods), or None
+    when this process runs no bench with budgets."""
     with _shared_lock:
         directory = _shared["directory"]
         if directory is None:
             return None
+        if isinstance(directory, str):  # ray-actor:NAME
+            key: Any = (directory, provider, model)
+            if key not in _shared["budgets"]:
+                _shared["budgets"][key] = RayBudget(directory.removeprefix(RAY_ACTOR), provider, model,
+                                                    _shared["sleep"])
+            return _shared["budgets"][key]
         key = budget_file(directory, provider, model)
         if key not in _shared["budgets"]:
             _shared["budgets"][key] = RateBudget(key, _shared["default"], _shared["clock"], _shared["sleep"])
@@ -322,3 +347,35 @@ def budget_file(directory: Path, provider: str, model: str) -> Path:
 
 def budget_files(directory: Path) -> list[Path]:
     return sorted(Path(directory).glob(f"*{STATE_SUFFIX}")) if Path(directory).is_dir() else []
+
+
+class RayBudget:
+    """A worker's handle on one provider and model's budget in the Ray actor that holds a bench's budgets
+    (`ratelimit_ray.BudgetKeeper`): a `RateBudget`'s methods, each an actor call (Ray is imported on the first)."""
+
+    def __init__(self, name: str, provider: str, model: str, sleep: Callable[[float], None] = time.sleep):
+        self.name, self.provider, self.model, self.sleep = name, provider, model, sleep
+        self._actor: Any = None
+
+    def _call(self, method: str, *args: Any) -> Any:
+        import ray
+
+        if self._actor is None:
+            self._actor = ray.get_actor(self.name, namespace=NAMESPACE)
+        return ray.get(getattr(self._actor, method).remote(self.provider, self.model, *args))
+
+    def try_take(self) -> float:
+        return float(self._call("try_take"))
+
+    def acquire(self) -> float:
+        return wait_for(self.try_take, self.sleep)
+
+    def observe(self, status: int, headers: Mapping[str, str] | Any) -> None:
+        self._call("observe", status, {str(k).lower(): str(v) for k, v in headers.items()})
+
+    def charge(self, tokens: int) -> None:
+        if tokens > 0:
+            self._call("charge", tokens)
+
+    def snapshot(self) -> dict[str, Any]:
+        return dict(self._call("snapshot"))
