@@ -92,7 +92,8 @@ def report(label: str, rows: list[Any]) -> bool:
     text = [r.text_tokens for r in rows]
     print(f"{label}: {len(rows)} calls; text tokens a call {statistics.median(text):.0f} median; "
           f"outside the shared prefix: median {statistics.median(outside):.0f}, max {max(outside)}; "
-          f"shared share of the input: median {statistics.median(share):.1%}, min {min(share):.1%}")
+          f"shared share of the input: median {statistics.median(share):.1%}, min {min(share):.1%}, "
+          f"over all calls {sum(r.shared_tokens for r in rows) / sum(r.input_tokens for r in rows):.1%}")
     return statistics.median(outside) <= MAX_OUTSIDE and statistics.median(share) >= MIN_SHARE
 
 
