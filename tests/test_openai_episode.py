@@ -54,6 +54,9 @@ def test_openai_pilot_flies_a_whole_episode(geo_sim, tmp_path):
     summary, steps = load_run(tmp_path / "run")
     assert summary["result"]["outcome"] == "success"
     assert all(s["raw_text"] for s in steps), "the raw model text is recorded for every step"
+    # the fake's prompt cache serves what a step shares with the step before (issue 27): each step records it
+    assert steps[0]["usage"]["cached_tokens"] == 0 and "cache_write_tokens" in steps[0]["usage"]
+    assert sum(s["usage"]["cached_tokens"] for s in steps) == result.cached_tokens > 0
     assert "sk-test-not-a-key" not in (tmp_path / "run" / "episode.jsonl").read_text()
 
 

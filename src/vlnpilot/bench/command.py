@@ -91,11 +91,12 @@ def print_report(report: BenchReport, console: Any) -> None:
     for s in report.summaries:
         lat = f", latency p50 {s.latency_p50_s:.3f} s p95 {s.latency_p95_s:.3f} s" if s.latency_p50_s is not None \
             else ""
+        cached = f" ({s.cached_tokens / s.input_tokens:.0%} cached)" if s.input_tokens else ""
         console.print(
             f"[bold]{s.pilot}[/bold]: {s.successes}/{s.episodes} successes ({100 * s.success_rate:.1f}%, 95% CI "
             f"{100 * s.ci_low:.1f}-{100 * s.ci_high:.1f}%), SPL {s.spl:.3f}, {s.collisions} collisions, "
             f"{s.steps_exceeded} step limits, {s.false_successes} false successes, tokens "
-            f"{s.input_tokens}/{s.output_tokens}, cost ${s.cost_usd:.4f}{lat}", highlight=False)
+            f"{s.input_tokens}/{s.output_tokens}{cached}, cost ${s.cost_usd:.4f}{lat}", highlight=False)
     state = "complete" if report.complete else f"{report.finished}/{report.episodes} episodes"
     console.print(f"bench {state} in {report.wall_s:.1f} s ({report.ran} run now); tables: "
                   + ", ".join(str(p) for p in report.tables[:3]), highlight=False)
