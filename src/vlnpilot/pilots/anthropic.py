@@ -2,7 +2,7 @@
 
 The state's answer schema is the `input_schema` of a single tool, `submit_decision`, and tool_choice
 forces it, so the reply is the tool's JSON input. Prompt caching: cache_control marks the end of the
-system prompt, of the episode context and of the state prompt; the image and the step text come last. With the
+system prompt, of the episode context and of the state prompt; the step text and then the image come last. With the
 `history` option it also marks the end of the earlier turns (the model's last answer): four breakpoints at most.
 (Anthropic's cache prefix starts with the tools, and the tool schema is per state, so the cache hits
 across the consecutive steps spent in one state, which is most of an episode.)
