@@ -10,7 +10,9 @@ protocol, so the official SDKs are exercised for real. A fake answers, in this o
 Actions: decision, text, prose, not_json, missing_field, wrong_enum, refusal, truncated, content_filter,
 rate_limit, server_error, status, bad_key, hang, bad_body, reject_schema (OpenAI: 400 on json_schema).
 `delay` (seconds) is slept before every normal answer; the server is threaded, so concurrent clients overlap;
-`rendezvous=N` makes normal answers wait until N requests are in flight together.
+`rendezvous=N` makes normal answers wait until N requests are in flight together. Each answer reports the cached
+tokens of its provider's prompt cache (`prompt_cache.py`: a prefix seen in the last five minutes; `fake.prompt_cache
+.clock` may be injected), or `cached_tokens=N` as a fixed count.
 """
 
 from __future__ import annotations
