@@ -55,7 +55,7 @@ def start_keeper(directory: str | Path, default: str | None = None) -> tuple[str
 
     name = f"vlnpilot-rate-{uuid.uuid4().hex[:12]}"
     here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
-    actor = ray.remote(num_cpus=0)(BudgetKeeper).options(name=name, namespace=NAMESPACE,
-                                                        scheduling_strategy=here).remote(str(directory), default)
+    keeper: Any = ray.remote(num_cpus=0)(BudgetKeeper)
+    actor = keeper.options(name=name, namespace=NAMESPACE, scheduling_strategy=here).remote(str(directory), default)
     ray.get(actor.ready.remote())  # started before the first worker looks for it
     return RAY_ACTOR + name, actor

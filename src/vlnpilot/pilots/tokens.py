@@ -72,7 +72,8 @@ def openai_segments(kwargs: dict[str, Any], *, schema: bool = True) -> list[Segm
         out.append(text_segment(json.dumps(fmt["json_schema"], sort_keys=True)))
     for message in kwargs["messages"]:
         content = message["content"]
-        for part in [{"type": "text", "text": content}] if isinstance(content, str) else content:
+        parts: list[dict[str, Any]] = [{"type": "text", "text": content}] if isinstance(content, str) else content
+        for part in parts:
             if part["type"] == "text":
                 out.append(text_segment(part["text"]))
             else:
