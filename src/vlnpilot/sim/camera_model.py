@@ -14,6 +14,7 @@ the same frames.
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 from dataclasses import dataclass
@@ -134,6 +135,21 @@ def distortion_table(params: TelloCameraParams, src_w: int, src_h: int) -> np.nd
     return (sy * src_w + sx).reshape(-1)
 
 
+@functools.lru_cache(maxsize=8)
+def _default_table(w: int, h: int) -> np.ndarray:
+    return distortion_table(TelloCameraParams(), w, h)
+
+
+def through_lens(image: np.ndarray, camera: str = "tello") -> np.ndarray:
+    """`image` (HxW or HxWxC, any dtype: a segmentation too) as `camera`'s lens shows it, at the same size: the
+    geometry of a Tello frame without its exposure, noise or compression (what apparent widths are measured on)."""
+    if check_camera(camera) == "ideal":
+        return image
+    h, w = image.shape[:2]
+    flat = image.reshape(h * w, *image.shape[2:])
+    return flat[_default_table(w, h)].reshape(image.shape)
+
+
 def central_focal_px(params: TelloCameraParams) -> float:
     """The output's focal length at the image centre, in pixels (for the blur)."""
     half_diag_u = math.tan(math.radians(params.diagonal_fov_deg) / 2)
@@ -209,12 +225,13 @@ class TelloCamera:
         if abs(gain - 1) > 1e-3:
             img = img.point([min(255, int(i * gain + 0.5)) for i in range(256)] * 3 + list(range(256)))
         img = ImageChops.add(img, self._noise_image(w, h), scale=1.0, offset=-128)
-        img = img.resize((p.width, p.height), Image.Resampling.NEAREST)
-        buf = io.BytesIO()
+        buf = io.BytesIO()  # compressed at the render's size: the frame's detail is the render's (docs/camera.md)
         img.save(buf, format="JPEG", quality=p.jpeg_quality)
         buf.seek(0)
         out = Image.open(buf)
         out.load()
+        if out.size != (p.width, p.height):
+            out = out.resize((p.width, p.height), Image.Resampling.NEAREST)
         return np.asarray(out)
 
 

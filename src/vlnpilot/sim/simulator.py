@@ -372,6 +372,12 @@ class Simulator:
             out["randomize"] = self.randomization.to_dict()
         return out
 
+    def _place_cameras(self, pose: Pose) -> None:
+        """The drone's body and cameras at `pose`, for a render only (kinematics, no collision pass)."""
+        self._set_qpos(pose)
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)
+
     def _front_frame(self) -> np.ndarray:
         """The front camera's frame as its camera model delivers it: a Tello's frame is rendered at the pose
         `lag_ms` before the last move ended, streaked by the move if it was still under way."""
@@ -385,13 +391,11 @@ class Simulator:
                 motion = frame_motion(move, self.camera.params, self.camera.focal_px)
             lagged = move.apply(start, at or 0.0)
             if lagged != self._pose:
-                self._set_qpos(lagged)
-                mujoco.mj_kinematics(self.model, self.data)
-                mujoco.mj_camlight(self.model, self.data)
+                self._place_cameras(lagged)
                 try:
                     return self.camera.frame(self._draw(drone.FRONT_CAMERA), motion)
                 finally:
-                    self._sync(chase=False)
+                    self._place_cameras(self._pose)  # back where the drone is (no collision pass: nothing moved)
         return self.camera.frame(self._draw(drone.FRONT_CAMERA), motion)
 
     def _renderer(self, width: int, height: int) -> mujoco.Renderer:
