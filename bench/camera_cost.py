@@ -13,7 +13,6 @@ JPEG, and the machine.
 from __future__ import annotations
 
 import argparse
-import io
 import statistics
 import sys
 import time
@@ -21,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 from machine import describe, publish  # bench/machine.py, beside this script
-from PIL import Image
 
 from vlnpilot.core.commands import get_command
 from vlnpilot.sim import SimConfig, Simulator  # selects the headless GL backend before mujoco loads
@@ -83,9 +81,8 @@ def frame_alone(reps: int) -> dict[str, float]:
             camera.frame(render, motion)
             took.append(time.perf_counter() - t0)
         out[name] = ms(statistics.median(took))
-    buf = io.BytesIO()
-    Image.fromarray(camera.frame(render)).save(buf, format="JPEG", quality=camera.params.jpeg_quality)
-    out["jpeg_kb"] = len(buf.getvalue()) / 1000
+    camera.frame(render)
+    out["jpeg_kb"] = camera.jpeg_bytes / 1000
     return out
 
 

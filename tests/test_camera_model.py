@@ -74,7 +74,10 @@ def test_randomisation_stays_in_its_ranges_leaves_the_drone_alone_and_repeats_pe
         drone = [i for i in range(plain.model.nmat) if plain.model.material(i).name.startswith("drone_")]
         assert drone and np.allclose(rand.model.mat_rgba[drone], plain.model.mat_rgba[drone])
         lit = plain.model.mat_rgba[:, :3] > 0.05
-        assert (ratio[lit] >= RANGES["material_tint"][0] - 1e-6).all()
+        low = RANGES["material_brightness"][0] * RANGES["material_tint"][0]
+        high = RANGES["material_brightness"][1] * RANGES["material_tint"][1]
+        clipped = rand.model.mat_rgba[:, :3][lit] >= 1  # a white paint made lighter stays white
+        assert ((ratio[lit] >= low - 1e-6) & ((ratio[lit] <= high + 1e-6) | clipped)).all()
         first = rand.model.mat_rgba.copy()
         rand.reset("living_room")
         rand.reset("bedroom")
@@ -126,6 +129,7 @@ def test_bad_camera_options_get_one_line_and_exit_2(args: tuple[str, ...], says:
     code, _, err = run_main(monkeypatch, capsys, "run", "Go to the kitchen", "--pilot", "oracle", *args,
                             "--out", str(tmp_path / "r"), "--no-video", "-q")
     assert code == 2 and len(err.strip().splitlines()) == 1 and says in err, err
+    assert not (tmp_path / "r").exists()  # refused before the run directory is claimed
 
 
 def test_a_real_tello_frames_are_never_post_processed() -> None:

@@ -139,6 +139,8 @@ def check_camera_for(robot: str, camera: str | None, camera_lag_ms: float | None
     if camera is not None:
         camera = check_camera(camera)
     if key == "sim":
+        if camera_lag_ms is not None and camera != "tello":
+            raise ConfigError("a camera lag applies to --camera tello only")
         return
     if camera == "ideal":
         raise ConfigError(f"--robot {key} sends its own camera's frames: --camera ideal applies to --robot sim only "

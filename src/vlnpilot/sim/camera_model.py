@@ -6,8 +6,8 @@ JPEG compression at the stream's bitrate. Frame lag is the simulator's part (it 
 before the move ended, `lagged_fraction`). Every parameter, with its source, is in docs/camera.md.
 
 Cost matters (bench/camera_cost.py: at most 1.3x the ideal step): the lens is one precomputed table of source
-pixels read with one numpy gather, the streak Pillow's box blur along the move, the exposure a lookup table, the
-noise one of a few crops of a seeded tile added in C (`ImageChops.add`), the stream's size a nearest-neighbour
+pixels read with one numpy gather, the streak Pillow's box blur along the move, the exposure and the noise (one of
+a few crops of a seeded tile) one pass of Pillow's `ImageChops.add`, the stream's size a nearest-neighbour
 resize, the compression Pillow's JPEG encoder and decoder. Deterministic: the same renders, seeds and moves give
 the same frames.
 """
@@ -26,6 +26,7 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.records import Motion
 from vlnpilot.core.tello_spec import ASPECT, DIAGONAL_FOV_DEG
 
+_PIXEL = np.dtype([("r", "u1"), ("g", "u1"), ("b", "u1")])  # one RGB pixel, so that a gather moves 3 bytes at once
 CAMERAS = ("ideal", "tello")  # --camera: ideal (the render), tello (the Tello's stream)
 DEFAULT_CAMERA = "ideal"
 
@@ -172,6 +173,7 @@ class TelloCamera:
         self._noise: dict[tuple[int, int], list[Image.Image]] = {}
         self._rng = np.random.default_rng(0)
         self._gain: float | None = None
+        self.jpeg_bytes = 0
         self.bias = 1.0  # the exposure bias of a randomised world (sim/randomize.py)
 
     @property
@@ -193,8 +195,7 @@ class TelloCamera:
             reps = (math.ceil(h / self.NOISE_TILE) + 1, math.ceil(w / self.NOISE_TILE) + 1, 1)
             big = np.tile(tile, reps)
             offsets = np.random.default_rng(26).integers(0, self.NOISE_TILE, (self.NOISE_FRAMES, 2))
-            self._noise[(w, h)] = [Image.fromarray(np.ascontiguousarray(big[y:y + h, x:x + w])).convert("RGBX")
-                                   for x, y in offsets]
+            self._noise[(w, h)] = [Image.fromarray(np.ascontiguousarray(big[y:y + h, x:x + w])) for x, y in offsets]
         return self._noise[(w, h)][int(self._rng.integers(self.NOISE_FRAMES))]
 
     def _exposure(self, render: np.ndarray) -> float:
@@ -215,18 +216,17 @@ class TelloCamera:
         h, w = render.shape[:2]
         if (w, h) not in self._table:
             self._table[(w, h)] = distortion_table(p, w, h)
-        rgbx = np.empty((h, w, 4), np.uint8)
-        rgbx[..., :3] = render
-        lens = np.take(rgbx.view(np.uint32).reshape(-1), self._table[(w, h)])  # one 4-byte gather per pixel
-        img = Image.frombuffer("RGBX", (w, h), lens, "raw", "RGBX", 0, 1)
+        pixels = np.ascontiguousarray(render).reshape(-1, 3).view(_PIXEL).reshape(-1)
+        lens = np.take(pixels, self._table[(w, h)])  # one 3-byte gather per pixel
+        img = Image.frombuffer("RGB", (w, h), lens.view(np.uint8), "raw", "RGB", 0, 1)
         if not motion.still:
             img = _motion_blur(img, motion, w / p.width)
         gain = self._exposure(render)
-        if abs(gain - 1) > 1e-3:
-            img = img.point([min(255, int(i * gain + 0.5)) for i in range(256)] * 3 + list(range(256)))
-        img = ImageChops.add(img, self._noise_image(w, h), scale=1.0, offset=-128)
+        # exposure and noise in one pass, (pixel + noise - 128) x gain: the sensor's gain amplifies its noise too
+        img = ImageChops.add(img, self._noise_image(w, h), scale=1 / gain, offset=-round(128 * gain))
         buf = io.BytesIO()  # compressed at the render's size: the frame's detail is the render's (docs/camera.md)
         img.save(buf, format="JPEG", quality=p.jpeg_quality)
+        self.jpeg_bytes = buf.tell()  # what the frame cost the stream (docs/camera.md compares it with the bitrate)
         buf.seek(0)
         out = Image.open(buf)
         out.load()

@@ -2,7 +2,8 @@
 height and exposure, varied on the compiled model at reset, deterministic per seed (Tobin et al. 2017).
 
 The ranges (docs/camera.md) stay within what a real house and a real Tello show, so that nothing a task names
-changes: a tint keeps each colour's hue family (a red chair stays red), texture scale stays within +-15 %.
+changes: a paint gets lighter or darker and shifts its hue slightly (a white fridge stays white), texture scale
+stays within +-15 %.
 Geometry is never changed (collisions, the monitor and the oracle see the same world).
 """
 
@@ -15,8 +16,11 @@ import numpy as np
 
 RANGES = {  # name: (low, high); one source for the code and docs/camera.md
     "light_intensity": (0.7, 1.3),  # scales every light's diffuse and the headlight
-    "light_temperature_k": (3000.0, 6500.0),  # warm bulb .. daylight, as an RGB tint of the lights
-    "material_tint": (0.85, 1.15),  # per material and channel, on its rgba
+    # warm white bulb .. daylight, as an RGB tint of the lights: what a camera's auto white balance leaves of
+    # 2700-6500 K light (the renders have no white balance, so the whole range would paint a white fridge yellow)
+    "light_temperature_k": (4000.0, 6500.0),
+    "material_brightness": (0.85, 1.15),  # per material, on its rgba: lighter and darker paints
+    "material_tint": (0.95, 1.05),  # per material and channel: a slight shift that keeps each colour's hue
     "texture_scale": (0.85, 1.15),  # per material, on its texrepeat
     "camera_height_m": (-0.05, 0.05),  # the front camera's mounting height, relative to the drone body
     "exposure_ev": (-0.5, 0.5),  # the camera's exposure bias, in stops
@@ -90,7 +94,7 @@ class Randomizer:
         m.light_diffuse[:] = np.clip(b["light_diffuse"] * light, 0, 1)
         m.vis.headlight.diffuse[:] = np.clip(b["headlight"] * light, 0, 1)
         m.vis.headlight.ambient[:] = np.clip(b["ambient"] * light, 0, 1)
-        tint = draw("material_tint", (m.nmat, 3))
+        tint = draw("material_brightness", (m.nmat, 1)) * draw("material_tint", (m.nmat, 3))
         scale = draw("texture_scale", (m.nmat, 1))
         keep = np.array([i in self.skip_materials for i in range(m.nmat)], bool)
         tint[keep], scale[keep] = 1.0, 1.0
