@@ -108,6 +108,16 @@ def test_a_tello_run_is_recorded_and_its_replay_reproduces_every_frame(tmp_path:
                             "--camera", "ideal", "--out", str(tmp_path / "other"), "--no-video", "-q")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "--camera tello" in err
     assert not (tmp_path / "other").exists()  # refused before anything is written
+    # as a trial: its set's suite replays the row in the same world (tests/test_trials.py reads it too)
+    import runpy
+
+    import yaml
+
+    script = runpy.run_path(str(Path(__file__).resolve().parents[1] / "scripts" / "import_trial.py"))
+    dest = script["import_trial"](flown, tmp_path / "set", "living-kitchen-1", flown_by="a test", interface="files",
+                                  scene=None, account=None, memory="none")
+    assert json.loads((dest / "trial.json").read_text())["camera"] == camera
+    assert yaml.safe_load((tmp_path / "set" / "suite.yaml").read_text())["rows"][0]["randomize"] == 3
 
 
 def test_a_run_with_the_ideal_camera_records_no_camera(tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
@@ -175,3 +185,16 @@ def test_the_emulator_streams_the_tello_camera_frames(monkeypatch: pytest.Monkey
         assert obs.front_rgb.shape == (720, 960, 3)
         sent = emu._grab()
         assert np.abs(obs.front_rgb.astype(int) - sent.astype(int)).mean() < 15
+
+
+def test_the_gym_environments_take_the_camera_and_a_randomised_world() -> None:
+    from vlnpilot.sim.gym_env import CabinEnv
+
+    env = CabinEnv(camera="tello", randomize=2)
+    try:
+        obs, _ = env.reset(seed=1)
+        assert obs["front"].shape == env.observation_space["front"].shape == (720, 960, 3)
+        assert env.observation_space.contains(env.step(0)[0])
+        assert env.sim.camera_settings()["randomize"]["seed"] == 2
+    finally:
+        env.close()
