@@ -6,8 +6,8 @@ JPEG compression at the stream's bitrate. Frame lag is the simulator's part (it 
 before the move ended, `lagged_fraction`). Every parameter, with its source, is in docs/camera.md.
 
 Cost matters (bench/camera_cost.py: at most 1.3x the ideal step): the lens is one precomputed table of source
-pixels read with one numpy gather, the streak Pillow's box blur along the move, the exposure and the noise (one of
-a few crops of a seeded tile) one pass of Pillow's `ImageChops.add`, the stream's size a nearest-neighbour
+pixels read with one numpy gather, the streak Pillow's box blur along the move, the exposure a lookup table, the
+noise (one of a few crops of a seeded tile) Pillow's `ImageChops.add_modulo`, the stream's size a nearest-neighbour
 resize, the compression Pillow's JPEG encoder and decoder. Deterministic: the same renders, seeds and moves give
 the same frames.
 """
@@ -133,7 +133,7 @@ def distortion_table(params: TelloCameraParams, src_w: int, src_h: int) -> np.nd
     xu, yu = _undistort((gx - src_w / 2) / f_out, (gy - src_h / 2) / f_out, params.k1, params.k2)
     sx = np.clip(np.floor(xu * f_src + src_w / 2), 0, src_w - 1).astype(np.int32)
     sy = np.clip(np.floor(yu * f_src + src_h / 2), 0, src_h - 1).astype(np.int32)
-    return (sy * src_w + sx).reshape(-1)
+    return (sy * src_w + sx).reshape(-1).astype(np.intp)  # numpy's own index type: the fastest gather
 
 
 @functools.lru_cache(maxsize=8)
@@ -164,6 +164,9 @@ class TelloCamera:
     name = "tello"
     NOISE_TILE = 256  # the noise is a crop of this seeded square, tiled to the render's size
     NOISE_FRAMES = 16  # crops kept (each frame draws one)
+    NOISE_MAX = 8  # the noise is clipped to +-8 grey levels (3.2 sigma); the exposure keeps pixels 8 from the ends,
+    # the sensor's black level and its white clip, so that the noise is added modulo 256 without wrapping (in C,
+    # `ImageChops.add_modulo`, 7x faster than a clipped add)
 
     def __init__(self, params: TelloCameraParams | None = None):
         self.params = params or TelloCameraParams()
@@ -187,11 +190,11 @@ class TelloCamera:
         self._gain, self.bias = None, bias
 
     def _noise_image(self, w: int, h: int) -> Image.Image:
-        """128 + noise at the render's size: one of `NOISE_FRAMES` crops of a seeded tile, drawn per frame."""
+        """The noise (modulo 256) at the render's size: one of `NOISE_FRAMES` crops of a seeded tile, drawn per
+        frame."""
         if (w, h) not in self._noise:
-            tile = np.random.default_rng(25).normal(128.0, self.params.noise_sigma,
-                                                    (self.NOISE_TILE, self.NOISE_TILE, 3))
-            tile = np.clip(np.rint(tile), 0, 255).astype(np.uint8)
+            tile = np.random.default_rng(25).normal(0.0, self.params.noise_sigma, (self.NOISE_TILE, self.NOISE_TILE, 3))
+            tile = (np.clip(np.rint(tile), -self.NOISE_MAX, self.NOISE_MAX).astype(np.int16) % 256).astype(np.uint8)
             reps = (math.ceil(h / self.NOISE_TILE) + 1, math.ceil(w / self.NOISE_TILE) + 1, 1)
             big = np.tile(tile, reps)
             offsets = np.random.default_rng(26).integers(0, self.NOISE_TILE, (self.NOISE_FRAMES, 2))
@@ -217,13 +220,13 @@ class TelloCamera:
         if (w, h) not in self._table:
             self._table[(w, h)] = distortion_table(p, w, h)
         pixels = np.ascontiguousarray(render).reshape(-1, 3).view(_PIXEL).reshape(-1)
-        lens = np.take(pixels, self._table[(w, h)])  # one 3-byte gather per pixel
+        lens = np.take(pixels, self._table[(w, h)], mode="clip")  # one 3-byte gather per pixel (all in range)
         img = Image.frombuffer("RGB", (w, h), lens.view(np.uint8), "raw", "RGB", 0, 1)
         if not motion.still:
             img = _motion_blur(img, motion, w / p.width)
-        gain = self._exposure(render)
-        # exposure and noise in one pass, (pixel + noise - 128) x gain: the sensor's gain amplifies its noise too
-        img = ImageChops.add(img, self._noise_image(w, h), scale=1 / gain, offset=-round(128 * gain))
+        gain, k = self._exposure(render), self.NOISE_MAX
+        img = img.point(np.clip(np.rint(np.arange(256) * gain), k, 255 - k).astype(np.uint8).tolist() * 3)
+        img = ImageChops.add_modulo(img, self._noise_image(w, h))  # never wraps: the exposure left k levels free
         buf = io.BytesIO()  # compressed at the render's size: the frame's detail is the render's (docs/camera.md)
         img.save(buf, format="JPEG", quality=p.jpeg_quality)
         self.jpeg_bytes = buf.tell()  # what the frame cost the stream (docs/camera.md compares it with the bitrate)
