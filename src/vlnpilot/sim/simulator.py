@@ -66,7 +66,8 @@ class SimConfig:
         object.__setattr__(self, "camera", check_camera(self.camera))
         if self.camera_lag_ms is not None and self.camera != "tello":
             raise ConfigError("a camera lag applies to --camera tello only")
-        if self.randomize is not None and not (isinstance(self.randomize, int) and 0 <= self.randomize < 2**31):
+        if self.randomize is not None and (isinstance(self.randomize, bool) or not isinstance(self.randomize, int)
+                                           or not 0 <= self.randomize < 2**31):
             raise ConfigError(f"randomize must be a seed in 0..{2**31 - 1}, got {self.randomize!r}")
         max_w, max_h = MAX_RESOLUTION
         for w, h, what in ((self.width, self.height, "front"), (self.rear_width, self.rear_height, "rear")):
