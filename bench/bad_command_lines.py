@@ -61,6 +61,9 @@ def command_lines(tmp: Path) -> list[list[str]]:
         [*run, "--judge", "nosuch"], [*run, "--live-port", "70000"], [*run, "--live-port", "-1"],
         [*run, "--live-port", "x"], [*run, "--live", "--live-host", "0.0.0.0"], [*run, "--live-host"],
         [*run, "--live", "--live-host", "203.0.113.1", "--pilot", "oracle"],
+        [*run, "--camera", "fisheye"], [*run, "--camera"], [*run, "--camera-lag-ms", "100"],
+        [*run, "--camera", "tello", "--camera-lag-ms", "-1"], [*run, "--randomize", "-1"], [*run, "--randomize", "x"],
+        [*run, "--robot", "tello", "--camera", "ideal"],
         # watch
         ["watch"], ["watch", str(not_run)], ["watch", str(corrupt)], ["watch", str(a_file)],
         ["watch", f"{t}/missing"], ["watch", str(corrupt), "--port", "70000"],
@@ -81,7 +84,8 @@ def command_lines(tmp: Path) -> list[list[str]]:
         ["bench", "--base-url", "http://127.0.0.1:99999/v1"], ["bench", "--pilot-option", "novalue"],
         ["bench", "--pilot-option", "nosuch=1"], ["bench", "--shield", "nosuch"], ["bench", "--overlay", "nosuch"],
         ["bench", "--context", "nosuch"], ["bench", "--report", "x"], ["bench", "--plugin", "no.such.module"],
-        ["bench", "--plugin"], ["bench", "--ray-address"],
+        ["bench", "--plugin"], ["bench", "--ray-address"], ["bench", "--camera", "fisheye"],
+        ["bench", "--randomize", "-3"],
         # tello-emulator
         ["tello-emulator", "--scene", "nosuch"], ["tello-emulator", "--spawn", "nosuch"],
         ["tello-emulator", "--host", "0.0.0.0"], ["tello-emulator", "--host", "example.org"],
@@ -90,6 +94,7 @@ def command_lines(tmp: Path) -> list[list[str]]:
         ["tello-emulator", "--battery", "101"], ["tello-emulator", "--battery", "-1"],
         ["tello-emulator", "--drop-replies", "1"], ["tello-emulator", "--drop-replies", "x"],
         ["tello-emulator", "--video-delay", "11"], ["tello-emulator", "--video-delay", "-1"],
+        ["tello-emulator", "--camera", "fisheye"], ["tello-emulator", "--randomize", "x"],
         # serve
         ["serve", "--pilot", "nosuch"], ["serve", "--pilot", "oracle"], ["serve", "--pilot", "openai:"],
         ["serve", "--allow", "nosuch"], ["serve", "--pilot", "openai", "--allow", "oracle"],

@@ -25,6 +25,7 @@ from pathlib import Path
 import yaml
 
 from vlnpilot.core.rundir import load_run
+from vlnpilot.pilots.replay import camera_flown_with
 from vlnpilot.scene import load_scene
 
 PILOT_MEMORY = re.compile(r"conversation|none|history=[1-9]\d*(,images=\d+)?")
@@ -67,6 +68,7 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         "shield": summary["config"]["shield"],
         "profile": summary["config"]["profile"],
         "sensors": range_sensor_of(summary),
+        **({"camera": camera} if (camera := summary["config"].get("camera")) else {}),  # docs/camera.md
         "outcome": summary["result"]["outcome"],
         "steps": summary["result"]["steps"],
     }
@@ -91,6 +93,9 @@ def write_suite(set_dir: Path) -> Path:
         sensors = range_sensor_of(summary)
         if sensors != "none":  # the drone it was flown with: a replay must carry the same sensor
             rows[-1]["sensors"] = sensors
+        randomize = camera_flown_with(summary["config"]).get("randomize")
+        if randomize is not None:  # the world it was flown in: its camera height decides what is visible
+            rows[-1]["randomize"] = randomize
         limits.add(summary["config"]["max_steps"])
         profiles.add(summary["config"]["profile"])
         pins.add((trial.get("context") or "paper", trial.get("shield") or "off"))

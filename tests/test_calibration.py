@@ -11,11 +11,13 @@ prompt says instead of stating a rule that is wrong. The range rule holds inside
 and from 45 degrees. The widest kinds fill the image from beyond the distance, so their cue adds half a metre: they
 must not fill it yet from that far. A change of threshold, camera or furniture that breaks the agreement fails
 here (doubling `SuccessConfig.object_distance_m` without touching the prompts does; so does one 65 % rule).
+The front cues are checked through both cameras' lenses (`--camera ideal` and `tello`, docs/camera.md): the Tello
+lens's barrel distortion is applied to the same segmentation (`camera_model.through_lens`), so it costs nothing.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pytest
@@ -24,6 +26,7 @@ from vlnpilot.core.records import Pose
 from vlnpilot.prompting.render import render_state_prompt, system_prompt
 from vlnpilot.scene.model import target_kind
 from vlnpilot.sim import SimConfig, Simulator
+from vlnpilot.sim.camera_model import through_lens
 from vlnpilot.sim.ranging import beam
 from vlnpilot.sim.target_views import (
     VIEW_ANGLES,
@@ -90,6 +93,13 @@ class Seen:
     floor_before: bool
     front_m: float | None
     beam_on_target: bool
+    width_tello: float = 0.0  # the width through the Tello camera's lens
+    floor_before_tello: bool = False
+
+    def through(self, camera: str) -> Seen:
+        """This view as `camera` shows it (its widths and floor: the range does not depend on the lens)."""
+        return self if camera == "ideal" else replace(self, width=self.width_tello,
+                                                      floor_before=self.floor_before_tello)
 
     def looks_close(self) -> bool:
         """The Reach Object stop rule for this target's kind, without its extra half metre."""
@@ -121,8 +131,10 @@ def seen() -> list[Seen]:
                         if pose is None:
                             continue
                         seg, ids = view(sim, pose), sim.target_geoms[target.id]
+                        lens = through_lens(seg, "tello")
                         out.append(Seen(name, target.id, view_name, round(d, 3), width_fraction(seg, ids),
-                                        _floor_at_bottom(sim, seg, ids), *_beam(sim, target.id)))
+                                        _floor_at_bottom(sim, seg, ids), *_beam(sim, target.id),
+                                        width_fraction(lens, ids), _floor_at_bottom(sim, lens, ids)))
     return out
 
 
@@ -135,9 +147,13 @@ def test_every_kind_is_rendered() -> None:
     assert kinds >= {"refrigerator", "mirror", "sink", "toilet", "desk", "tv", "bed"}
 
 
-def test_every_cue_holds_well_inside_the_success_distance(seen: list[Seen]) -> None:
+@pytest.mark.parametrize("camera", ["ideal", "tello"])
+def test_every_cue_holds_well_inside_the_success_distance(seen: list[Seen], camera: str) -> None:
     """A pilot that obeys its kind's cue can stop: every target passes it from 0.7 of the success distance
     (the widest kinds then fly their extra half metre, which the next test bounds)."""
+    if camera == "tello":  # the lens magnifies the centre: widths through it are not the render's
+        assert sum(s.width_tello > s.width for s in seen) > len(seen) / 2
+    seen = [s.through(camera) for s in seen]
     near = [s for s in seen if s.distance == round(0.7 * SUCCESS_M, 3) and s.view == "front"]
     assert _kinds(near) >= {"refrigerator", "mirror", "sink", "toilet", "plant", "desk", "tv", "bed", "wardrobe"}
     far_off = [f"{s.scene} {s.target_id}: {s.width:.0%}" for s in near if not s.looks_close()
@@ -145,11 +161,12 @@ def test_every_cue_holds_well_inside_the_success_distance(seen: list[Seen]) -> N
     assert not far_off, f"looks far at 0.7x: {far_off}"
 
 
+@pytest.mark.parametrize("camera", ["ideal", "tello"])
 @pytest.mark.parametrize("factor", [1.1, 2.0])
-def test_no_cue_holds_beyond_the_success_distance(seen: list[Seen], factor: float) -> None:
+def test_no_cue_holds_beyond_the_success_distance(seen: list[Seen], factor: float, camera: str) -> None:
     """A pilot that obeys its kind's cue never declares too early: no target passes it from beyond the distance,
     and the widest kinds do not yet fill the image from their extra half metre beyond it."""
-    front = [s for s in seen if s.view == "front"]
+    front = [s.through(camera) for s in seen if s.view == "front"]
     beyond = [s for s in front if s.distance == round(factor * SUCCESS_M, 3) and not close_cue(s.target_id).then_m]
     beyond += [s for s in front if close_cue(s.target_id).then_m
                and s.distance == round(SUCCESS_M + close_cue(s.target_id).then_m, 3)]

@@ -15,6 +15,7 @@ from vlnpilot.core.rundir import load_run
 from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
+from vlnpilot.pilots.replay import camera_flown_with
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.mission import Mission
 from vlnpilot.tasks.success import recorded_success
@@ -26,8 +27,10 @@ ALL = sorted(p.parent for p in TRIALS.glob("*/*/trial.json"))
 
 @pytest.fixture(scope="module")
 def simulators():
-    sims: dict[str, Simulator] = {}
-    yield lambda scene: sims.setdefault(scene, Simulator(scene, SimConfig(render=False)))
+    sims: dict[tuple[str, int | None], Simulator] = {}
+    # a trial flown in a randomised world (docs/camera.md) replays in it: its camera height decides what is visible
+    yield lambda scene, randomize=None: sims.setdefault((scene, randomize), Simulator(scene, SimConfig(
+        render=False, randomize=randomize)))
     for sim in sims.values():
         sim.close()
 
@@ -59,7 +62,7 @@ def test_trials_cover_the_paper_suite() -> None:
 @pytest.mark.parametrize("trial_dir", ALL, ids=[f"{p.parent.name}/{p.name}" for p in ALL])
 def test_trial_replays_to_its_recorded_outcome(simulators, trial_dir: Path) -> None:
     trial = json.loads((trial_dir / "trial.json").read_text())
-    sim = simulators(trial["scene"])
+    sim = simulators(trial["scene"], camera_flown_with(load_run(trial_dir)[0]["config"]).get("randomize"))
     assert sim.scene.fingerprint() == trial["scene_fingerprint"], "the scene this trial flew has changed"
     result = replay(sim, trial_dir)
     assert (result.outcome, result.steps) == (trial["outcome"], trial["steps"])

@@ -32,6 +32,14 @@ OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
 PROFILE_HELP = "FSM profile: paper, fast or ranged (fast, and A2 in Reach Object)."
 SensorsOpt = Annotated[str, typer.Option("--sensors", help="Range sensors the drone carries: none, tof (a RoboMaster "
                                          "TT's forward ToF) or multiranger (Crazyflie Multi-ranger deck).")]
+CameraOpt = Annotated[str | None, typer.Option("--camera", help="What the front camera delivers in simulation: ideal "
+                                               "(the render; the default) or tello (what a Tello's stream sends: "
+                                               "docs/camera.md). A real Tello's frames are never changed.")]
+CameraLagOpt = Annotated[float | None, typer.Option("--camera-lag-ms", min=0, max=2000, help="The tello camera's "
+                                                   "frame lag (default 300 ms: docs/camera.md).")]
+RandomizeOpt = Annotated[int | None, typer.Option("--randomize", min=0, max=2**31 - 1, help="Domain randomisation "
+                                                 "seed: lights, paints, texture scale, camera height, exposure "
+                                                 "(docs/camera.md).")]
 MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PlannerOpt = Annotated[str, typer.Option("--planner", help="Who plans the mission: auto (the pilot, if it plans, "
                                         "unless the instruction is one plain goal), pilot or parser.")]
@@ -136,6 +144,9 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
         live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
         planner: PlannerOpt = "auto",
+        camera: CameraOpt = None,
+        camera_lag_ms: CameraLagOpt = None,
+        randomize: RandomizeOpt = None,
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
@@ -162,6 +173,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     robot = check_robot(robot, tello_host)
     capabilities = robot_capabilities(robot, sensors, tello_host)  # refuses a sensor the drone does not carry
     recorded = recorded_settings(pilot)  # a replay flies as it was flown, unless an option says otherwise
+    camera, camera_lag_ms, randomize = _imaging(robot, pilot, recorded, camera, camera_lag_ms, randomize)
     shield = shield or recorded.get("shield") or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
@@ -198,7 +210,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
-                                        operator=operator, sensors=sensors) as env:
+                                        operator=operator, sensors=sensors, camera=camera,
+                                        camera_lag_ms=camera_lag_ms, randomize=randomize) as env:
         try:
             result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
                                           pilot_spec=pilot, overwrite=True,  # claimed above
@@ -212,6 +225,27 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
     console.print(f"run directory: {escape(str(run_dir))}  (report: {_optional_report(run_dir, video=video)})")
     raise typer.Exit(exit_code_for([result.outcome]))
+
+
+def _imaging(robot: str, pilot: str | None, recorded: dict[str, str], camera: str | None, lag_ms: float | None,
+             randomize: int | None) -> tuple[str | None, float | None, int | None]:
+    """`--camera`, `--camera-lag-ms`, `--randomize` checked for the robot (docs/camera.md); a replay's frames are
+    made as they were recorded, and other frames than those are refused (a real Tello's frames are its own)."""
+    from vlnpilot.pilots.replay import check_replay_camera
+    from vlnpilot.robots.session import check_camera_for
+
+    if robot == "sim":
+        camera = camera or recorded.get("camera")
+        lag = recorded.get("camera_lag_ms")
+        lag_ms = lag_ms if lag_ms is not None else (float(lag) if lag else None)
+        randomize = randomize if randomize is not None else (int(recorded["randomize"]) if "randomize" in recorded
+                                                             else None)
+    check_camera_for(robot, camera, lag_ms, randomize)
+    if robot == "sim":
+        from vlnpilot.sim.camera_model import camera_flown_with
+
+        check_replay_camera(pilot, camera_flown_with(camera, lag_ms, randomize))
+    return camera, lag_ms, randomize
 
 
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
@@ -378,7 +412,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 
 
 @app.command("bench")
-def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",  # noqa: PLR0913 - one parameter per flag (Typer)
+def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",  # noqa: PLR0913, E501 - one parameter per flag (Typer)
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,
@@ -408,6 +442,10 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           plugin: Annotated[list[str] | None, typer.Option(
               "--plugin", help="A module to import first, in every worker too: it may register pilots, "
               "executors and shields. Repeatable.")] = None,
+          camera: CameraOpt = None,
+          randomize: Annotated[int | None, typer.Option(
+              "--randomize", min=0, max=2**31 - 1, help="Domain randomisation seed of the rows whose suite names "
+              "none (a suite's `randomize:`, per suite or row, wins; docs/camera.md).")] = None,
           estimate: Annotated[bool, typer.Option(
               "--estimate", help="Print the estimated calls, tokens, cached share and cost of each pilot, counted "
               "offline, and exit without flying.")] = False) -> None:
@@ -439,7 +477,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
                               shield=shield or pinned_shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
                               plugins=tuple(plugin or ()), sensors=sensors, rate_limit=rate_limit,
-                              frames=frames if frames is not None or resume else report)
+                              frames=frames if frames is not None or resume else report, camera=camera,
+                              randomize=randomize)
     if report:
         console.print(f"report: {_optional_report(bench_dir, bench=True)}")
     raise typer.Exit(exit_code_for(r["result"]["outcome"] for r in ResultsLog(bench_dir / RESULTS).read()))
@@ -457,6 +496,10 @@ def tello_emulator(scene: SceneOpt = "cabin",
                    drop_seed: Annotated[int, typer.Option("--drop-seed", min=0, help="Seed of which replies are "
                                                           "dropped (the same seed drops the same ones).")] = 0,
                    video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
+                   camera: Annotated[str, typer.Option("--camera", help="What its video shows: tello (what a Tello "
+                                                       "sends; its lag is --video-delay) or ideal (the renders); "
+                                                       "docs/camera.md.")] = "tello",
+                   randomize: RandomizeOpt = None,
                    ) -> None:
     """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
     from vlnpilot.core.extras import require
@@ -470,7 +513,8 @@ def tello_emulator(scene: SceneOpt = "cabin",
     if spawn is not None:
         sc.spawn(spawn)  # validate: one line listing the spawns
     config = EmulatorConfig(host=host, port=port, state_port=state_port, video_port=video_port, battery_pct=battery,
-                            drop_replies=drop_replies, video_delay_s=video_delay, seed=drop_seed)
+                            drop_replies=drop_replies, video_delay_s=video_delay, seed=drop_seed, camera=camera,
+                            randomize=randomize)
     serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 

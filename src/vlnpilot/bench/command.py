@@ -10,6 +10,7 @@ from vlnpilot.bench.executors import BenchError
 from vlnpilot.bench.manifest import MANIFEST, read_manifest
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
 from vlnpilot.bench.suite import suite_pins
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.ranging import range_sensor
 from vlnpilot.pilots.ratelimit import parse_rate_limit
 
@@ -40,8 +41,9 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     the paper's context): `shield` and `episode_options['context']`, given, win over a pin. `frames`: record each
     step's camera frames, which the report's episode pages show; False writes none and skips the chase camera's
     render, used by nothing else. None: as the resumed bench recorded them, else True. `rate_limit`: 'RPM,TPM',
-    the budget of each provider and model until its rate-limit headers say otherwise (pilots/ratelimit.py). These
-    two come as keywords of `more` (the signature's ceiling, pyproject's max-args, is not raised for them).
+    the budget of each provider and model until its rate-limit headers say otherwise (pilots/ratelimit.py).
+    `camera` (ideal | tello) and `randomize` (a seed for the rows whose suite names none): docs/camera.md. These
+    come as keywords of `more` (the signature's ceiling, pyproject's max-args, is not raised for them).
     """
     frames, rate_limit = _more_settings(more)
     limit = parse_rate_limit(rate_limit)  # a bad value: one line, before anything runs
@@ -69,7 +71,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         episode_options=options,
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render and frames,
         plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors),
-        rate_limit=f"{limit.rpm:g},{limit.tpm or 0:g}" if limit else None)
+        rate_limit=f"{limit.rpm:g},{limit.tpm or 0:g}" if limit else None, **_imaging(more))
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:
@@ -104,10 +106,21 @@ def print_report(report: BenchReport, console: Any) -> None:
 
 def _more_settings(more: dict[str, Any]) -> tuple[bool | None, str | None]:
     """`frames` and `rate_limit`, the bench's two keyword-only settings beyond the signature."""
-    unknown = sorted(set(more) - {"frames", "rate_limit"})
+    unknown = sorted(set(more) - {"frames", "rate_limit", "camera", "randomize"})
     if unknown:
         raise TypeError(f"bench_command() got unexpected keyword arguments: {', '.join(unknown)}")
     return more.get("frames"), more.get("rate_limit")
+
+
+def _imaging(more: dict[str, Any]) -> dict[str, Any]:
+    """`camera` and `randomize` (docs/camera.md), checked: a bad camera is one line, before anything runs."""
+    from vlnpilot.sim.camera_model import check_camera
+
+    randomize = more.get("randomize")
+    if randomize is not None and (isinstance(randomize, bool) or not isinstance(randomize, int)
+                                  or not 0 <= randomize < 2**31):
+        raise ConfigError(f"--randomize must be a seed in 0..{2**31 - 1}, got {randomize!r}")
+    return {"camera": check_camera(more.get("camera") or "ideal"), "randomize": randomize}
 
 
 def _with_pins(suite: str | Path, shield: str | None, options: dict[str, Any]) -> dict[str, Any]:

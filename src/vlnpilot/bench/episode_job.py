@@ -47,6 +47,8 @@ class EpisodeSpec:
     spawn_jitter_m: float = 0.0
     spawn_jitter_deg: float = 0.0
     sensors: str = "none"  # the range sensors the drone carries (vlnpilot.core.ranging.SENSORS)
+    camera: str = "ideal"  # what the front camera delivers (sim.camera_model.CAMERAS)
+    randomize: int | None = None  # the domain randomisation seed of the row's world (docs/camera.md)
     mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict); None: the goal above
     rate_dir: str | None = None  # the bench's shared rate budgets (pilots/ratelimit.py), where every worker reads
     rate_limit: str | None = None  # 'RPM,TPM' of --rate-limit, until a provider's headers say otherwise
@@ -70,15 +72,15 @@ class SimulatorCache:
         self._all: list[Any] = []
         self._lock = threading.Lock()
 
-    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",
-            rear_camera: bool = True) -> Any:
+    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",  # noqa: PLR0913
+            rear_camera: bool = True, camera: str = "ideal", randomize: int | None = None) -> Any:
         from vlnpilot.sim import SimConfig, Simulator
 
         sims = getattr(self._local, "sims", None)
         if sims is None:
             sims = self._local.sims = {}
         key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors,
-                                rear_camera=rear_camera))
+                                rear_camera=rear_camera, camera=camera, randomize=randomize))
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
@@ -156,7 +158,7 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     frames = spec.save_frames and spec.render
     # the chase camera is seen only in the recorded frames (the episode pages of the report): without them, not rendered
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors,
-                         rear_camera=frames)
+                         rear_camera=frames, camera=spec.camera, randomize=spec.randomize)
     share_budgets(spec.rate_dir, parse_rate_limit(spec.rate_limit))  # before the pilot: it takes its budget
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)

@@ -62,6 +62,8 @@ class BenchSettings:
     render: bool = True  # False: no camera images (only for pilots that do not look), no frames recorded
     save_frames: bool = True
     sensors: str = "none"  # range sensors of every row's drone that names none itself (vlnpilot.core.ranging.SENSORS)
+    camera: str = "ideal"  # what the front camera delivers (sim.camera_model.CAMERAS; docs/camera.md)
+    randomize: int | None = None  # domain randomisation seed of every row whose suite and row name none
     plugins: tuple[str, ...] = ()  # modules to import in every worker (custom pilots registered by name)
     progress: bool = True
     rate_limit: str | None = None  # 'RPM,TPM' of every provider and model until its headers say (pilots/ratelimit.py)
@@ -194,6 +196,8 @@ def config_of(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSetting
         "episode_options": dict(settings.episode_options), "render": settings.render,
         "save_frames": settings.save_frames and settings.render,
         **({"sensors": settings.sensors} if settings.sensors != "none" else {}),  # benches before it hash alike
+        **({"camera": settings.camera} if settings.camera != "ideal" else {}),
+        **({"randomize": settings.randomize} if settings.randomize is not None else {}),
     }
 
 
@@ -217,7 +221,9 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
                     render=settings.render, save_frames=settings.save_frames, mission=row.mission,
                     spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg,
-                    sensors=row.sensors or settings.sensors,
+                    sensors=row.sensors or settings.sensors, camera=settings.camera,
+                    randomize=next((r for r in (row.randomize, suite.randomize, settings.randomize) if r is not None),
+                                   None),
                     rate_dir=str((out / RATE_DIR).resolve()), rate_limit=settings.rate_limit))
     return specs
 

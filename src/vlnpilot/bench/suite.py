@@ -50,10 +50,11 @@ from vlnpilot.tasks.mission_parser import plan_mission
 from vlnpilot.tasks.task import Task, parse_query
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "context", "shield",
-             "spawn_jitter", "spawn_labels", "rows")
+             "spawn_jitter", "spawn_labels", "randomize", "rows")
 # a row's own scene overrides the suite's (house suites); a row's `sensors` (none, tof, multiranger:
-# vlnpilot.core.ranging) the bench's --sensors; plan / refuse: what a mission suite expects
-_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "plan", "refuse")
+# vlnpilot.core.ranging) the bench's --sensors; plan / refuse: what a mission suite expects; a row's `randomize`
+# (a domain randomisation seed, docs/camera.md) the suite's, and the suite's the bench's --randomize
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "randomize", "plan", "refuse")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -77,6 +78,7 @@ class SuiteRow:
     scene: str | None = None  # this row's scene when it differs from the suite's (e.g. 'house:7')
     sensors: str | None = None  # the range sensors this row's drone carries, when it names them (else --sensors)
     mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict), resolved at the spawn
+    randomize: int | None = None  # this row's domain randomisation seed (docs/camera.md), when it names one
 
     @property
     def task(self) -> Task | Mission:
@@ -90,6 +92,8 @@ class SuiteRow:
         out = {**out, "scene": self.scene} if self.scene else out
         if self.sensors:
             out = {**out, "sensors": self.sensors}
+        if self.randomize is not None:
+            out = {**out, "randomize": self.randomize}
         return {**out, "plan": Mission.from_dict(self.mission).plan()} if self.mission else out
 
 
@@ -123,6 +127,7 @@ class Suite:
     description: str = ""
     source: str = ""  # 'builtin:paper' or the file path, for the manifest
     refused: tuple[RefusedRow, ...] = ()  # rows refused before take-off, as the suite expects (never flown)
+    randomize: int | None = None  # the domain randomisation seed of every row that names none (docs/camera.md)
 
     def row(self, row_id: str) -> SuiteRow:
         for r in self.rows:
@@ -143,7 +148,8 @@ class Suite:
     def canonical(self) -> dict[str, Any]:
         """What the suite measures (no names, descriptions or labels): the part that enters the config hash."""
         return {"scene": self.scene, "profile": self.profile, "spawn_jitter_m": self.spawn_jitter_m,
-                "spawn_jitter_deg": self.spawn_jitter_deg, "rows": [r.canonical() for r in self.rows]}
+                "spawn_jitter_deg": self.spawn_jitter_deg, "rows": [r.canonical() for r in self.rows],
+                **({"randomize": self.randomize} if self.randomize is not None else {})}
 
     def to_dict(self) -> dict[str, Any]:
         """The whole suite as plain data (YAML-able; `suite_from_dict` reads it back)."""
@@ -152,6 +158,7 @@ class Suite:
                 "profile": self.profile, **{k: v for k, v in (("context", self.context), ("shield", self.shield)) if v},
                 "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
                 "spawn_labels": dict(self.spawn_labels),
+                **({"randomize": self.randomize} if self.randomize is not None else {}),
                 "rows": [_row_dict(r) for r in self.rows]}
 
     def dump(self) -> str:
@@ -184,7 +191,8 @@ def _row_dict(r: SuiteRow) -> dict[str, Any]:
     what = ({"plan": Mission.from_dict(r.mission).plan()} if r.mission is not None else
             {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}})
     return {"id": r.id, "spawn": r.spawn, "query": r.query, **what, **({"scene": r.scene} if r.scene else {}),
-            **({"sensors": r.sensors} if r.sensors else {})}
+            **({"sensors": r.sensors} if r.sensors else {}),
+            **({"randomize": r.randomize} if r.randomize is not None else {})}
 
 
 def suite_pins(suite: str | Path) -> tuple[str | None, str | None]:
@@ -256,6 +264,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
         errors.append(f"unknown profile {profile!r}; valid profiles: {', '.join(PROFILES)}")
     context = _pin(data, "context", CONTEXT_PRESETS, errors)
     shield = _pin(data, "shield", SHIELD_REGISTRY.names(), errors)
+    randomize = _randomize_seed(data, "suite", errors)
     jitter = data.get("spawn_jitter") or {}
     jm = jd = 0.0
     if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
@@ -300,7 +309,8 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
                  max_steps=max_steps, seed=seed, profile=profile, context=context, shield=shield,
                  spawn_jitter_m=jm, spawn_jitter_deg=jd,
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
-                 description=str(data.get("description") or ""), source=source, refused=tuple(refused))
+                 description=str(data.get("description") or ""), source=source, refused=tuple(refused),
+                 randomize=randomize)
 
 
 def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | RefusedRow | None:
@@ -353,6 +363,7 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | Refuse
                 errors.append(f"{where}: the goal says {room}" + (f" / {target}" if target else "")
                               + f" but the query {query!r} parses to {parsed}")
     sensors = _row_sensors(raw, where, errors)
+    randomize = _randomize_seed(raw, where, errors)
     row_id = raw.get("id")
     if row_id is None:
         row_id = _slug(f"{spawn}-{query}")
@@ -363,7 +374,19 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | Refuse
     return SuiteRow(id=row_id, spawn=str(spawn), query=query, goal_room=task.goal_room, goal_target=task.goal_target,
                     scene=scene.name if row_scene is not None else None,
                     mission=None if mission.is_single else mission.to_dict(),
-                    sensors=str(sensors) if sensors is not None else None)
+                    sensors=str(sensors) if sensors is not None else None, randomize=randomize)
+
+
+def _randomize_seed(raw: dict[str, Any], where: str, errors: list[str]) -> int | None:
+    """A suite's or a row's `randomize:` seed (docs/camera.md), if it names one."""
+    value = raw.get("randomize")
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**31:
+        errors.append(f"{where}: 'randomize' must be a seed in "
+                      f"0..{2**31 - 1}, got {value!r}")
+        return None
+    return value
 
 
 def _row_sensors(raw: dict[str, Any], where: str, errors: list[str]) -> Any:

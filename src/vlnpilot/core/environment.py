@@ -132,6 +132,23 @@ def depth_sensing_of(env: object) -> DepthSensing | None:
     return cast(DepthSensing, env) if capabilities_of(env).depth else None
 
 
+@runtime_checkable
+class SimulatedCamera(Protocol):
+    """An environment whose frames are simulated says how (`camera_settings`: the camera model, its lag, the
+    randomised world: docs/camera.md); the run records it, and a replay flies with it. A real camera says nothing."""
+
+    def camera_settings(self) -> dict[str, Any]: ...
+
+
+def camera_settings_of(env: object) -> dict[str, Any] | None:
+    """How the environment's frames are simulated, or None (real frames, or the ideal camera in a world as built:
+    what every recording before the camera model flew, so their records stay as they were)."""
+    if not isinstance(env, SimulatedCamera):
+        return None
+    settings = env.camera_settings()
+    return None if settings == {"model": "ideal"} else settings
+
+
 def range_sensing_of(env: object) -> RangeSensing | None:
     """The environment as a range sensor if it declares one, else None."""
     return cast(RangeSensing, env) if capabilities_of(env).range_sensor != "none" else None

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import Decision
-from vlnpilot.core.environment import Environment, capabilities_of
+from vlnpilot.core.environment import Environment, camera_settings_of, capabilities_of
 from vlnpilot.core.fsm import State
 from vlnpilot.core.records import Observation, Pose
 from vlnpilot.core.rundir import Recorder, git_sha, package_versions
@@ -132,7 +132,8 @@ class EpisodeRecording:
             "config": {"max_steps": config.max_steps, "profile": config.profile, "max_reasks": config.max_reasks,
                        "context": {"preset": context_name(config.context_config), **config.context_config.to_dict()},
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
-                       "overlay": config.overlay, "safety": config.safety.to_dict()},
+                       "overlay": config.overlay, "safety": config.safety.to_dict(),
+                       **({"camera": camera} if (camera := camera_settings_of(env)) else {})},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
             "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),

@@ -162,8 +162,35 @@ def recorded_settings(spec: str | None) -> dict[str, str]:
     run_dir = Path(spec.removeprefix("replay:"))
     if not (run_dir / "summary.json").is_file():
         return {}
-    settings = _flown_with(load_run(run_dir)[0].get("config", {}))
-    return {key: str(value) for key, value in settings.items() if value}
+    config = load_run(run_dir)[0].get("config", {})
+    settings = {**_flown_with(config), **camera_flown_with(config)}
+    return {key: str(value) for key, value in settings.items() if value is not None and value != ""}
+
+
+def camera_flown_with(config: dict[str, Any]) -> dict[str, Any]:
+    """How a recorded run's frames were simulated (`config.camera`, docs/camera.md): camera, its lag, the
+    randomisation seed; {} for the ideal camera in the world as built (every recording before the camera model)."""
+    camera = config.get("camera") or {}
+    if not camera:
+        return {}
+    out: dict[str, Any] = {"camera": camera.get("model", "ideal")}
+    if camera.get("lag_ms") is not None:
+        out["camera_lag_ms"] = camera["lag_ms"]
+    if camera.get("randomize") is not None:
+        out["randomize"] = camera["randomize"]["seed"]
+    return out
+
+
+def check_replay_camera(spec: str | None, now: dict[str, Any]) -> None:
+    """Refuse (one line) to replay a `replay:RUN_DIR` recording with other frames than it was flown with
+    (`now`: `camera_flown_with` of this run's camera): the same answers to other images are not the recording."""
+    run_dir = Path(spec.removeprefix("replay:")) if spec and spec.startswith("replay:") else None
+    if run_dir is None or not (run_dir / "summary.json").is_file():
+        return
+    then = camera_flown_with(load_run(run_dir)[0].get("config", {}))
+    if {k: str(v) for k, v in then.items()} != {k: str(v) for k, v in now.items()}:
+        flags = " ".join(f"--{key.replace('_', '-')} {value}" for key, value in then.items()) or "--camera ideal"
+        raise ConfigError(f"{run_dir} was flown with other frames; replay it with {flags}")
 
 
 def _flown_with(config: dict[str, Any]) -> dict[str, Any]:

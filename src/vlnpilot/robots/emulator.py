@@ -54,8 +54,15 @@ class EmulatorConfig:
     seed: int = 0
     keepalive_known: bool = False  # firmware before SDK 3.0 answers "unknown command: keepalive"
     ext_tof: bool = False  # emulate a RoboMaster TT: `EXT tof?` answers the simulator's forward range, in mm
+    # What the video shows (docs/camera.md): ideal renders, or the Tello's camera (`tello-emulator` defaults to it;
+    # its lag is `video_delay_s`, in real time); `randomize`: the seed of a randomised world
+    camera: str = "ideal"
+    randomize: int | None = None
 
     def __post_init__(self) -> None:
+        from vlnpilot.sim.camera_model import check_camera
+
+        object.__setattr__(self, "camera", check_camera(self.camera))
         try:
             loopback = ipaddress.ip_address(self.host).is_loopback
         except ValueError:
@@ -96,7 +103,9 @@ class TelloEmulator:
 
         self.config, self.clock = config or EmulatorConfig(), clock or WallClock()
         self.sim = sim = Simulator(scene, SimConfig(render=False, sensors="tof" if self.config.ext_tof else "none"))
-        self._camera = (scene, SimConfig(width=width, height=height, rear_camera=False))
+        self._camera = (scene, SimConfig(width=width, height=height, rear_camera=False, camera=self.config.camera,
+                                         camera_lag_ms=0.0 if self.config.camera == "tello" else None,
+                                         randomize=self.config.randomize))
         self._viewer: Simulator | None = None  # created on the video thread
         spawn_obj = sim.scene.spawn(spawn) if spawn else sim.scene.spawns[0]
         self.home = spawn_obj.pose
@@ -339,7 +348,10 @@ class TelloEmulator:
         if self._frame is None or pose != self._frame_pose:
             if self._viewer is None:
                 self._viewer = Simulator(*self._camera)
-            self._frame, self._frame_pose = self._viewer.reset(pose).front_rgb, pose
+                self._frame = self._viewer.reset(pose, seed=self.config.seed).front_rgb
+            else:  # the camera follows: its exposure adapts, a move since the last frame streaks it
+                self._frame = self._viewer.place(pose).front_rgb
+            self._frame_pose = pose
         return self._frame
 
     def _release(self) -> None:

@@ -31,7 +31,8 @@ class Robot:
 
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
              sensors: str) -> AbstractContextManager[Any]:
-        """The environment, released when the block ends, whatever happened."""
+        """The environment, released when the block ends, whatever happened. A robot whose frames are simulated
+        also takes `camera` and `randomize` (`--camera`, `--randomize`: docs/camera.md)."""
         raise NotImplementedError
 
 
@@ -46,10 +47,12 @@ class SimRobot(Robot):
         return replace(Simulator.capabilities, range_sensor=wanted.name if wanted else "none"), "sim"
 
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
-             sensors: str) -> AbstractContextManager[Any]:
+             sensors: str, camera: str | None = None, camera_lag_ms: float | None = None,
+             randomize: int | None = None) -> AbstractContextManager[Any]:
         from vlnpilot.sim import SimConfig, Simulator
 
-        return Simulator(scene, SimConfig(sensors=sensors))
+        return Simulator(scene, SimConfig(sensors=sensors, camera=camera or "ideal", camera_lag_ms=camera_lag_ms,
+                                          randomize=randomize))
 
 
 class TelloRobot(Robot):
@@ -127,12 +130,39 @@ def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None
     return replace(carried, range_sensor=wanted.name if wanted else "none")
 
 
+def check_camera_for(robot: str, camera: str | None, camera_lag_ms: float | None, randomize: int | None) -> None:
+    """Refuse (one line) a simulated camera or world for a robot whose frames are real: a Tello's own stream is
+    never post-processed (its emulator simulates the Tello's camera itself: `vln-pilot tello-emulator --camera`)."""
+    from vlnpilot.sim.camera_model import check_camera
+
+    key = str(robot).strip().lower()
+    if camera is not None:
+        camera = check_camera(camera)
+    if key == "sim":
+        if camera_lag_ms is not None and camera != "tello":
+            raise ConfigError("a camera lag applies to --camera tello only")
+        return
+    if camera == "ideal":
+        raise ConfigError(f"--robot {key} sends its own camera's frames: --camera ideal applies to --robot sim only "
+                          "(simulate the Tello's camera in its emulator: vln-pilot tello-emulator --camera tello)")
+    if randomize is not None or camera_lag_ms is not None:
+        flag = "--randomize" if randomize is not None else "--camera-lag-ms"
+        raise ConfigError(f"{flag} applies to --robot sim only (the emulator takes it: vln-pilot tello-emulator "
+                          f"{flag} ...)")
+
+
 @contextmanager
 def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
-               operator: Any = None, sensors: str = "none") -> Iterator[Any]:
-    """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened."""
+               operator: Any = None, sensors: str = "none", camera: str | None = None,
+               camera_lag_ms: float | None = None, randomize: int | None = None) -> Iterator[Any]:
+    """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened.
+    `camera`, `camera_lag_ms`, `randomize`: how a simulator's frames are made (`check_camera_for` first)."""
+    imaging = {key: value for key, value in (("camera", camera), ("camera_lag_ms", camera_lag_ms),
+                                             ("randomize", randomize)) if value is not None}
+    if str(robot).strip().lower() != "sim":
+        imaging = {}  # a real camera (check_camera_for refused what does not apply)
     with get_robot(robot).open(scene, tello_host=tello_host, event_log=event_log, operator=operator,
-                               sensors=sensors) as env:
+                               sensors=sensors, **imaging) as env:
         yield env
 
 

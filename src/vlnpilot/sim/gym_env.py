@@ -26,6 +26,15 @@ HOUSE_ENV_ID = "VLNPilot/House-v0"
 GOAL_REWARD, COLLISION_REWARD, STEP_REWARD = 1.0, -1.0, -0.01
 
 
+def front_shape(config: SimConfig) -> tuple[int, int, int]:
+    """The front image's shape: the render's, or the Tello stream's with `camera="tello"` (docs/camera.md)."""
+    if config.camera == "tello":
+        from vlnpilot.sim.camera_model import TelloCameraParams
+
+        return TelloCameraParams().height, TelloCameraParams().width, 3
+    return config.height, config.width, 3
+
+
 class CabinEnv(gym.Env):
     """The simulated Tello in a scene, one table command per step.
 
@@ -41,7 +50,7 @@ class CabinEnv(gym.Env):
     def __init__(self, scene: str | Scene = "cabin", *, spawn: str | Spawn | Pose | None = None,
                  goal_room: str | None = None, max_steps: int = 50, width: int = 640, height: int = 480,
                  render_mode: str | None = None, spawn_jitter_m: float = 0.0, spawn_jitter_deg: float = 0.0,
-                 sensors: str = "none"):
+                 sensors: str = "none", camera: str = "ideal", randomize: int | None = None):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
         if max_steps < 1:
@@ -55,7 +64,7 @@ class CabinEnv(gym.Env):
         self.sim = Simulator(self.scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height,
                                                    rear_camera=render_mode == "rgb_array",
                                                    spawn_jitter_m=spawn_jitter_m, spawn_jitter_deg=spawn_jitter_deg,
-                                                   sensors=sensors))
+                                                   sensors=sensors, camera=camera, randomize=randomize))
         self.commands: tuple[Command, ...] = tuple(COMMANDS.values())
 
         (xmin, ymin), (xmax, ymax) = self.scene.bounds
@@ -63,7 +72,7 @@ class CabinEnv(gym.Env):
         high = np.array([xmax, ymax, self.scene.ceiling_height, 180.0], np.float32)
         self.action_space = spaces.Discrete(len(self.commands))
         self.observation_space = spaces.Dict({
-            "front": spaces.Box(0, 255, (height, width, 3), np.uint8),
+            "front": spaces.Box(0, 255, front_shape(self.sim.config), np.uint8),
             "pose": spaces.Box(low, high, (4,), np.float32),
             "collided": spaces.Discrete(2),
             **ranges_space(self.sim.range_sensor),

@@ -17,7 +17,8 @@ from gymnasium import spaces
 from vlnpilot.core.commands import COMMANDS
 from vlnpilot.core.ranging import range_sensor
 from vlnpilot.scene.houses import SEEDS, HouseSpec
-from vlnpilot.sim.gym_env import CabinEnv, ranges_space
+from vlnpilot.sim.gym_env import CabinEnv, front_shape, ranges_space
+from vlnpilot.sim.simulator import SimConfig
 
 MAX_EXTENT_M = 40.0  # bound of the pose observation: larger than any generated house
 
@@ -26,16 +27,19 @@ class HouseEnv(gym.Env):
     metadata = CabinEnv.metadata
 
     def __init__(self, house: int = 0, rooms: int | None = None, *, max_steps: int = 150, width: int = 640,
-                 height: int = 480, render_mode: str | None = None, sensors: str = "none"):
+                 height: int = 480, render_mode: str | None = None, sensors: str = "none", camera: str = "ideal",
+                 randomize: int | None = None):
         self._spec = HouseSpec(int(house), rooms)
         self._kwargs: dict[str, Any] = {"max_steps": max_steps, "width": width, "height": height,
-                                        "render_mode": render_mode, "sensors": sensors}
+                                        "render_mode": render_mode, "sensors": sensors, "camera": camera,
+                                        "randomize": randomize}
         self.render_mode = render_mode
         self._env: CabinEnv | None = None
         self.action_space = spaces.Discrete(len(COMMANDS))
         low = np.array([-1.0, -1.0, 0.0, -180.0], np.float32)
         high = np.array([MAX_EXTENT_M, MAX_EXTENT_M, 3.0, 180.0], np.float32)
-        self.observation_space = spaces.Dict({"front": spaces.Box(0, 255, (height, width, 3), np.uint8),
+        shape = front_shape(SimConfig(width=width, height=height, camera=camera, randomize=randomize))
+        self.observation_space = spaces.Dict({"front": spaces.Box(0, 255, shape, np.uint8),
                                               "pose": spaces.Box(low, high, (4,), np.float32),
                                               "collided": spaces.Discrete(2),
                                               **ranges_space(range_sensor(sensors))})

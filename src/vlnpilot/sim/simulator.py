@@ -20,10 +20,18 @@ from vlnpilot.core.commands import Command, get_command  # noqa: E402
 from vlnpilot.core.environment import Capabilities, GroundTruth  # noqa: E402
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
 from vlnpilot.core.ranging import RangeReading, range_sensor  # noqa: E402
-from vlnpilot.core.records import Footprint, Motion, Observation, Pose  # noqa: E402
+from vlnpilot.core.records import Footprint, Motion, Observation, Pose, wrap_deg  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import drone  # noqa: E402
+from vlnpilot.sim.camera_model import (  # noqa: E402
+    STILL,
+    TelloCamera,
+    check_camera,
+    frame_motion,
+    lagged_fraction,
+    make_camera,
+)
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
@@ -49,9 +57,18 @@ class SimConfig:
     visibility_height: int = 120
     sensors: str = "none"  # range sensors the drone carries (vlnpilot.core.ranging.SENSORS): none | tof | multiranger
     range_noise: bool = True  # the sensor's modelled noise on each reading (off: exact ray-cast distances)
+    camera: str = "ideal"  # what the front camera delivers (sim.camera_model.CAMERAS): ideal | tello
+    camera_lag_ms: float | None = None  # the tello camera's frame lag (None: its default, docs/camera.md)
+    randomize: int | None = None  # domain randomisation seed (sim/randomize.py); None: the scene as built
 
     def __post_init__(self) -> None:
         range_sensor(self.sensors)  # a bad name is refused here, in one line
+        object.__setattr__(self, "camera", check_camera(self.camera))
+        if self.camera_lag_ms is not None and self.camera != "tello":
+            raise ConfigError("a camera lag applies to --camera tello only")
+        if self.randomize is not None and (isinstance(self.randomize, bool) or not isinstance(self.randomize, int)
+                                           or not 0 <= self.randomize < 2**31):
+            raise ConfigError(f"randomize must be a seed in 0..{2**31 - 1}, got {self.randomize!r}")
         max_w, max_h = MAX_RESOLUTION
         for w, h, what in ((self.width, self.height, "front"), (self.rear_width, self.rear_height, "rear")):
             if not (16 <= w <= max_w and 16 <= h <= max_h):
@@ -136,6 +153,17 @@ class Simulator:
         self._range_rng = np.random.default_rng([0, 23])
         self.seed: int | None = None
         self.spawn: Spawn | None = None
+        self.camera = make_camera(self.config.camera, self.config.camera_lag_ms)
+        self._last_move: tuple[Pose, Motion, float] | None = None  # start, motion, fraction flown: the frame's lag
+        self._randomizer = None
+        self.randomization = None  # this world's draw (sim.randomize.Randomization), recorded with the run
+        if self.config.randomize is not None:
+            from vlnpilot.sim.randomize import Randomizer
+
+            drone_mats = frozenset(i for i in range(m.nmat) if m.material(i).name.startswith("drone_"))
+            front = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, drone.FRONT_CAMERA)
+            self._randomizer = Randomizer(m, front, drone_mats)
+            self.randomization = self._randomizer.apply(self.config.randomize)
 
     def _target_solid_names(self, target_id: str) -> set[str]:
         return {s.name for s in self.scene.solids if s.target == target_id}
@@ -220,6 +248,11 @@ class Simulator:
 
     def sweep(self, start: Pose, motion: Motion) -> tuple[Pose, tuple[str, str] | None]:
         """Execute `motion` from `start` in sub-steps; stop at the last free pose before the first contact."""
+        flown, hit = self._sweep(start, motion)
+        return motion.apply(start, flown), hit
+
+    def _sweep(self, start: Pose, motion: Motion) -> tuple[float, tuple[str, str] | None]:
+        """`sweep` as the fraction of `motion` flown before the first contact (1.0: all of it)."""
         cfg = self.config
         n = self.substeps(motion)
         free = 0.0
@@ -237,8 +270,8 @@ class Simulator:
                     lo = mid
                 else:
                     hi, hit = mid, mid_hit
-            return motion.apply(start, lo), hit
-        return motion.apply(start, 1.0), None
+            return lo, hit
+        return 1.0, None
 
     # -- Environment contract --------------------------------------------------------------------------
     def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:
@@ -260,7 +293,11 @@ class Simulator:
         hit = self.contact_at(pose)
         if hit is not None:
             raise ConfigError(f"spawn pose {pose.as_dict()} touches {hit[0]}")
-        self._pose, self._step = pose, 0
+        self._pose, self._step, self._last_move = pose, 0, None
+        if self._randomizer is not None:
+            self.randomization = self._randomizer.apply(self.config.randomize)  # from the base values: repeatable
+        exposure = self.randomization.exposure_gain if self.randomization is not None else 1.0
+        self.camera.reset(seed, exposure, world=self.config.randomize)
         return self._observe(collided=False, contact=None)
 
     def step(self, command: Command | str) -> Observation:
@@ -275,10 +312,27 @@ class Simulator:
         for v in (motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg):
             if not math.isfinite(v):
                 raise ConfigError(f"refusing a non-finite motion: {motion}")
-        pose, hit = self.sweep(self._pose, motion)
-        self._pose = pose
+        flown, hit = self._sweep(self._pose, motion)
+        self._last_move = (self._pose, motion, flown)
+        self._pose = motion.apply(self._pose, flown)
         self._step += 1
         return self._observe(collided=hit is not None, contact=hit)
+
+    def place(self, pose: Pose) -> Observation:
+        """Put the drone at `pose` without a collision sweep (a viewer that follows another simulator: the Tello
+        emulator's video) and observe; the camera sees the move from the last pose (its streak) and goes on adapting
+        its exposure."""
+        start = self._pose
+        if pose != start:
+            c, s = start.heading()
+            dx, dy = pose.x - start.x, pose.y - start.y
+            motion = Motion(forward_m=dx * c + dy * s, lateral_m=-dx * s + dy * c, vertical_m=pose.z - start.z,
+                            yaw_deg=wrap_deg(pose.yaw_deg - start.yaw_deg))
+            self._last_move = (start, motion, 1.0)
+        else:
+            self._last_move = None
+        self._pose = pose
+        return self._observe(collided=False, contact=None)
 
     def _sync(self, chase: bool = True) -> None:
         """Put the model at the drone's pose (collision queries may have moved it) and, with `chase`, place the chase
@@ -303,13 +357,48 @@ class Simulator:
     def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
         rear_camera = self.config.rear_camera
         self._sync(chase=rear_camera)  # once for both renders
-        front = self._draw(drone.FRONT_CAMERA)
         rear = self._draw(drone.REAR_CAMERA) if rear_camera else no_image()
+        front = self._front_frame()
         return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
                            contact=contact[0] if contact else None, step=self._step,
                            contact_part=contact[1] if contact else None)
 
     # -- rendering ------------------------------------------------------------------------------------------
+    def camera_settings(self) -> dict[str, object]:
+        """What the front camera delivers, as recorded with a run (`config.camera`; docs/camera.md)."""
+        out: dict[str, object] = {"model": self.camera.name}
+        if isinstance(self.camera, TelloCamera):
+            out["lag_ms"] = self.camera.params.lag_ms
+        if self.randomization is not None:
+            out["randomize"] = self.randomization.to_dict()
+        return out
+
+    def _place_cameras(self, pose: Pose) -> None:
+        """The drone's body and cameras at `pose`, for a render only (kinematics, no collision pass)."""
+        self._set_qpos(pose)
+        mujoco.mj_kinematics(self.model, self.data)
+        mujoco.mj_camlight(self.model, self.data)
+
+    def _front_frame(self) -> np.ndarray:
+        """The front camera's frame as its camera model delivers it: a Tello's frame is rendered at the pose
+        `lag_ms` before the last move ended, streaked by the move if it was still under way."""
+        if not self.config.render:
+            return no_image()
+        motion = STILL
+        if isinstance(self.camera, TelloCamera) and self._last_move is not None:
+            start, move, flown = self._last_move
+            at = lagged_fraction(move, flown, self.camera.params)
+            if at is not None:
+                motion = frame_motion(move, self.camera.params, self.camera.focal_px)
+            lagged = move.apply(start, at or 0.0)
+            if lagged != self._pose:
+                self._place_cameras(lagged)
+                try:
+                    return self.camera.frame(self._draw(drone.FRONT_CAMERA), motion)
+                finally:
+                    self._place_cameras(self._pose)  # back where the drone is (no collision pass: nothing moved)
+        return self.camera.frame(self._draw(drone.FRONT_CAMERA), motion)
+
     def _renderer(self, width: int, height: int) -> mujoco.Renderer:
         key = (width, height)
         if key not in self._renderers:

@@ -1,0 +1,120 @@
+"""Cost of the Tello camera model (issue 25): a simulator step with `--camera tello` against `--camera ideal`.
+
+Two simulators fly the same commands from each spawn of the cabin, alternately step by step (the same poses, the
+same load on the machine): one with the ideal camera, one with the Tello camera and a randomised world
+(`--randomize 1`). Twice: with the front camera only (a bench without frames, the model pilots' view) and with
+the chase camera too (what `vln-pilot run` and a bench with its report record). Prints the medians and p90 of a
+step, their ratio (target: at most 1.3x), what one Tello frame costs alone (still and streaked), the bytes of its
+JPEG, and the machine.
+
+    .venv/bin/python bench/camera_cost.py [--steps 40] [--smoke]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+from machine import describe, publish  # bench/machine.py, beside this script
+
+from vlnpilot.core.commands import get_command
+from vlnpilot.sim import SimConfig, Simulator  # selects the headless GL backend before mujoco loads
+from vlnpilot.sim.camera_model import FrameMotion, TelloCamera
+
+SEQUENCE = ("A1", "B1", "A2", "C2", "D1", "A1", "D2", "C1", "A3", "B2", "E", "A1", "C3", "A2", "B1", "A1")
+TARGET = 1.3  # a tello step at most this many times an ideal one (issue 25)
+OUT = Path(__file__).parent / "results" / "camera_cost.md"
+
+
+def ms(seconds: float) -> float:
+    return seconds * 1000.0
+
+
+def p90(values: list[float]) -> float:
+    return float(np.percentile(values, 90))
+
+
+def measure(steps: int, rear: bool, scene: str = "cabin") -> dict[str, list[float]]:
+    """The whole step of an ideal and a tello simulator flying the same commands, alternately."""
+    sims = {"ideal": Simulator(scene, SimConfig(rear_camera=rear)),
+            "tello": Simulator(scene, SimConfig(rear_camera=rear, camera="tello", randomize=1))}
+    times: dict[str, list[float]] = {key: [] for key in sims}
+    try:
+        for spawn in sims["ideal"].scene.spawns:
+            for sim in sims.values():
+                sim.reset(spawn.id, seed=1)
+                sim.step("E")  # warm-up: renderers, GL contexts and the lens table exist before we time anything
+                sim.reset(spawn.id, seed=1)
+            for i in range(steps):
+                cmd = get_command(SEQUENCE[i % len(SEQUENCE)])
+                collided = False
+                for key, sim in sims.items():
+                    t0 = time.perf_counter()
+                    obs = sim.step(cmd)
+                    times[key].append(time.perf_counter() - t0)
+                    collided = collided or obs.collided
+                if collided:  # start over from the spawn rather than grind against the obstacle
+                    for sim in sims.values():
+                        sim.reset(spawn.id, seed=1)
+    finally:
+        for sim in sims.values():
+            sim.close()
+    return times
+
+
+def frame_alone(reps: int) -> dict[str, float]:
+    """One Tello frame made from a 640x480 render: still, streaked by a turn; and the JPEG's bytes."""
+    with Simulator("cabin", SimConfig(rear_camera=False)) as sim:
+        render = sim.reset().front_rgb
+    camera = TelloCamera()
+    camera.reset(1)
+    out: dict[str, float] = {}
+    for name, motion in (("still", FrameMotion()), ("streaked", FrameMotion(blur_x_px=20.0))):
+        camera.frame(render, motion)
+        took = []
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            camera.frame(render, motion)
+            took.append(time.perf_counter() - t0)
+        out[name] = ms(statistics.median(took))
+    camera.frame(render)
+    out["jpeg_kb"] = camera.jpeg_bytes / 1000
+    return out
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=40, help="steps per spawn and configuration")
+    parser.add_argument("--smoke", action="store_true", help="2 steps per spawn (for the tests)")
+    args = parser.parse_args()
+    steps = 2 if args.smoke else args.steps
+    lines = ["# Step cost: the Tello camera model against the ideal camera", "",
+             f"Machine: {describe()}. {steps} steps per spawn of the cabin, the two cameras alternating step by "
+             "step; the tello simulator also randomises its world (`--randomize 1`).", "",
+             "| cameras rendered | ideal median (p90), ms | tello median (p90), ms | ratio of medians | target |",
+             "|---|---|---|---|---|"]
+    ratios = []
+    for rear, label in ((False, "front only (bench without frames)"), (True, "front + chase (`run`, bench report)")):
+        t = measure(steps, rear)
+        ratio = statistics.median(t["tello"]) / statistics.median(t["ideal"])
+        ratios.append(ratio)
+        lines.append(f"| {label} | {ms(statistics.median(t['ideal'])):.1f} ({ms(p90(t['ideal'])):.1f}) | "
+                     f"{ms(statistics.median(t['tello'])):.1f} ({ms(p90(t['tello'])):.1f}) | {ratio:.2f}x | "
+                     f"{'met' if ratio <= TARGET else 'NOT met'} (<= {TARGET}x) |")
+    alone = frame_alone(3 if args.smoke else 30)
+    lines += ["", f"One Tello frame from a 640x480 render, alone: {alone['still']:.1f} ms still, "
+              f"{alone['streaked']:.1f} ms streaked by a turn; its JPEG is {alone['jpeg_kb']:.1f} kB."]
+    text = "\n".join(lines) + "\n"
+    if args.smoke:
+        print(text)
+    else:
+        publish(text, OUT)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
