@@ -45,23 +45,26 @@ def test_the_tello_camera_sends_960x720_frames_that_differ_from_the_render_and_r
     assert small.shape == ideal[0].shape
 
 
-def test_the_frame_lags_along_the_last_move_and_streaks_along_it() -> None:
-    p = TelloCameraParams(lag_ms=300)
-    forward = Motion(forward_m=0.5)  # 1 s at 0.5 m/s: the frame is from 0.7 of it
-    assert lagged_fraction(forward, 1.0, p) == pytest.approx(0.7)
-    assert lagged_fraction(Motion(forward_m=0.1), 1.0, p) is None  # 0.2 s: the frame is from before the move
+def test_the_frame_shows_the_settled_pose_unless_the_lag_outlasts_the_controllers_wait() -> None:
+    p = TelloCameraParams(lag_ms=300)  # the controller waits 1.1 s after a move: a 300 ms stream shows it settled
+    assert lagged_fraction(Motion(forward_m=0.5), 1.0, p) == 1.0
+    assert lagged_fraction(Motion(forward_m=0.5), 0.6, p) == 0.6  # a move stopped short: where it stopped
+    slow = TelloCameraParams(lag_ms=1600)  # 0.5 s longer than the wait
+    forward = Motion(forward_m=0.5)  # 1 s at 0.5 m/s: the frame is from half way
+    assert lagged_fraction(forward, 1.0, slow) == pytest.approx(0.5)
+    assert lagged_fraction(Motion(forward_m=0.1), 1.0, slow) is None  # 0.2 s: the frame is from before the move
     turn = frame_motion(Motion(yaw_deg=30), p, focal_px=600)
     assert turn.blur_x_px > 5 and turn.blur_y_px == 0 and turn.zoom == 0  # a turn streaks along x
     climb = frame_motion(Motion(vertical_m=0.3), p, focal_px=600)
     assert climb.blur_y_px > 0 and climb.blur_x_px == 0
     seen = {}
-    for lag in (0, 600):  # A2 flies 0.5 s: with 600 ms of lag its frame is the hover before it
+    for lag in (300, 1700):  # A2 flies 0.5 s: 1.7 s of lag outlasts it and the 1.1 s wait: the hover before it
         with Simulator("cabin", SimConfig(rear_camera=False, camera="tello", camera_lag_ms=lag)) as sim:
             before = sim.reset("living_room", seed=1).front_rgb.astype(int)
             after = sim.step("A2")
             assert after.pose != sim.scene.spawn("living_room").pose  # the drone moved either way
             seen[lag] = np.abs(after.front_rgb.astype(int) - before).mean()
-    assert seen[600] < 2 < seen[0], seen  # the lagged frame still shows where the move began
+    assert seen[1700] < 2 < seen[300], seen  # a lag within the wait shows the move; a longer one where it began
 
 
 def test_randomisation_stays_in_its_ranges_leaves_the_drone_alone_and_repeats_per_seed() -> None:

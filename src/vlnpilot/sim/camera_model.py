@@ -54,7 +54,11 @@ class TelloCameraParams:
     speed_mps: float = 0.5  # how fast a move flies (SDK `speed`), for the lag and the blur
     yaw_rate_dps: float = 60.0  # how fast a rotation turns
     scene_depth_m: float = 2.0  # a typical distance to what is seen, for the blur of a sideways or vertical move
-    lag_ms: float = 300.0  # the frame shows the world this long before the move ended (djitellopy #77: 300-800)
+    lag_ms: float = 300.0  # the stream shows the world this long ago (djitellopy #77: 300-800)
+    # The real backend takes a step's frame only after the move replied, hovered `move_settle_s` (0.3 s) and its
+    # stream delivered a frame decoded `video_latency_s` (0.8 s) later (robots/tello.yaml): a lag shorter than that
+    # wait shows the settled pose, as the prompt promises; only a longer lag shows a stale, streaked frame.
+    frame_wait_s: float = 1.1
     ae_rate: float = 0.5  # the share of an exposure error the auto-exposure corrects per step
     ae_target: float = 100.0  # the mean grey level it aims at: the median of the renders' means (docs/camera.md)
     ae_range: tuple[float, float] = (0.6, 1.6)  # the gains it can reach
@@ -90,12 +94,15 @@ def move_duration_s(motion: Motion, params: TelloCameraParams) -> float:
 
 
 def lagged_fraction(motion: Motion, flown: float, params: TelloCameraParams) -> float | None:
-    """The fraction of `motion` at which the frame is taken, `lag_ms` before the move ended after `flown` of it;
-    None: the frame is from before the move began (the drone hovered: no blur)."""
+    """The fraction of `motion` the world had reached when the frame shown was exposed: `lag_ms` before the
+    controller took it, `frame_wait_s` after the move ended after `flown` of it. `flown`: the move had ended (the
+    settled pose, no streak); None: the frame is from before the move began (the drone hovered: no streak)."""
     duration = move_duration_s(motion, params) * flown
     if duration <= 0:
         return None
-    at = duration - params.lag_ms / 1000
+    at = duration + params.frame_wait_s - params.lag_ms / 1000
+    if at >= duration:
+        return flown
     return None if at <= 0 else flown * at / duration
 
 

@@ -388,7 +388,7 @@ class Simulator:
         if isinstance(self.camera, TelloCamera) and self._last_move is not None:
             start, move, flown = self._last_move
             at = lagged_fraction(move, flown, self.camera.params)
-            if at is not None:
+            if at is not None and at < flown:  # still under way when the frame was exposed: streaked
                 motion = frame_motion(move, self.camera.params, self.camera.focal_px)
             lagged = move.apply(start, at or 0.0)
             if lagged != self._pose:
