@@ -2,7 +2,9 @@
 
     python scripts/trials_table.py [trials]            # markdown on stdout
     python scripts/trials_table.py --write [trials]    # the same tables into README.md (the summary),
-                                                       # docs/results.md (per row) and trials/README.md
+                                                       # docs/results.md (per row), docs/pilot-memory.md,
+                                                       # docs/camera.md (Tello camera beside ideal) and
+                                                       # trials/README.md
 
 Reads only trials/SET/ROW/trial.json, so every figure in the README comes from the committed trials.
 """
@@ -35,6 +37,12 @@ LABELS = {  # the sets in the order the tables list them (a set not named here c
     "missions-houses-fast": "missions of two and three stages, unseen houses, plus context, fast profile",
     "stateless-houses-paper": "unseen houses, paper context, one fresh pilot per step (stateless)",
     "stateless-houses-plus": "unseen houses, plus context, one fresh pilot per step (stateless)",
+    "tello-cabin": "cabin rows of after-plus, Tello camera model, randomised world",
+    "tello-houses": "house routes of houses-plus, Tello camera model, randomised world",
+    "tello-objects": "objects of objects20-none, Tello camera model, randomised world, fast profile",
+    "tello-stale-cabin": "Tello camera, first build (frames one move behind), cabin",
+    "tello-stale-houses": "Tello camera, first build (frames one move behind), houses",
+    "tello-stale-objects": "Tello camera, first build (frames one move behind), objects, fast profile",
 }
 
 
@@ -132,11 +140,52 @@ def memory_table(sets: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def images(trial: dict) -> str:
+    """What the pilot's camera showed: the ideal render, or the Tello camera model with its randomisation seed."""
+    camera = trial.get("camera") or {}
+    if camera.get("model", "ideal") == "ideal":
+        return "ideal"
+    seed = (camera.get("randomize") or {}).get("seed")
+    return f"tello, lag {camera.get('lag_ms', 0):g} ms" + (f", world seed {seed}" if seed is not None else "")
+
+
+def _same_row(t: dict) -> tuple[str, str, str, str, str, str]:
+    return (t["scene"], _base_row(t["row"]), t["context"], t.get("profile", "paper"), t.get("sensors", "none"),
+            t["pilot_memory"])
+
+
+def camera_table(sets: dict[str, list[dict]]) -> str:
+    """The rows flown through the Tello camera model (issue 25) beside the same rows (scene, row, context, profile,
+    sensor and pilot memory) flown with the ideal camera: successes, episodes and mean steps, every prompt version."""
+    every = [t for name, trials in sets.items() if not name.startswith("tello-stale") for t in trials]
+    tello = [t for t in every if images(t) != "ideal"]
+    ideal: dict[tuple, list[dict]] = defaultdict(list)
+    for t in every:
+        if images(t) == "ideal":
+            ideal[_same_row(t)].append(t)
+
+    def cell(got: list[dict]) -> str:
+        wins = sum(t["outcome"] == "success" for t in got)
+        return f"{wins}/{len(got)} ({sum(t['steps'] for t in got) / len(got):.0f} steps)" if got else ""
+
+    lines = ["| row (Tello camera and ideal) | scene | ideal camera | Tello camera, randomised |", "|---|---|---|---|"]
+    both_ideal, both_tello = [], []
+    for key in sorted({_same_row(t) for t in tello}):
+        mine = [t for t in tello if _same_row(t) == key]
+        both_ideal += ideal[key]
+        both_tello += mine
+        lines.append(f"| {key[1]} | {key[0]} | {cell(ideal[key])} | {cell(mine)} |")
+    if both_tello:
+        rate = [sum(t["outcome"] == "success" for t in g) / len(g) for g in (both_ideal, both_tello)]
+        lines.append(f"| all | | {cell(both_ideal)} = {rate[0]:.0%} | {cell(both_tello)} = {rate[1]:.0%} |")
+    return "\n".join(lines)
+
+
 def trial_lines(sets: dict[str, list[dict]]) -> str:
-    lines = ["| trials | row | outcome | steps | prompt version | flown |", "|---|---|---|---|---|---|"]
+    lines = ["| trials | row | outcome | steps | prompt version | images | flown |", "|---|---|---|---|---|---|---|"]
     for name in sorted(sets, key=_order):
         for t in sets[name]:
-            lines.append(f"| {name} | {t['row']} | {t['outcome']} | {t['steps']} | {t['prompt_hash']} | "
+            lines.append(f"| {name} | {t['row']} | {t['outcome']} | {t['steps']} | {t['prompt_hash']} | {images(t)} | "
                          f"{t['started_at'][:16]} |")
     return "\n".join(lines)
 
@@ -159,6 +208,8 @@ def write_readmes(root: Path) -> None:
     results.write_text(replace_table(results.read_text(), row_table(sets)))
     memory = root.parent / "docs" / "pilot-memory.md"
     memory.write_text(replace_table(memory.read_text(), memory_table(sets)))
+    camera = root.parent / "docs" / "camera.md"
+    camera.write_text(replace_table(camera.read_text(), camera_table(sets)))
     (root / "README.md").write_text(replace_table((root / "README.md").read_text(), trial_lines(sets)))
 
 
@@ -176,6 +227,8 @@ def main() -> None:
     print(memory_table(sets))
     print()
     print(mission_table(root, sets))
+    print()
+    print(camera_table(sets))
     print()
     print(trial_lines(sets))
 
