@@ -13,6 +13,7 @@ import numpy as np
 
 from vlnpilot.core.ranging import FRONT_BEAM_START_M, RangeReading, RangeSensor
 from vlnpilot.core.records import Pose
+from vlnpilot.scene.detail import DETAIL_GROUP
 from vlnpilot.sim import drone
 
 # Where each beam leaves the drone, in its body frame (x forward, y left, z up): (direction, start offset).
@@ -23,6 +24,8 @@ _BEAMS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]]
     "right": ((0.0, -1.0, 0.0), (0.0, -drone.WIDTH / 2, 0.0)),
     "up": ((0.0, 0.0, 1.0), (0.0, 0.0, drone.HEIGHT / 2)),
 }
+# Every geom group but the rich detail's (visual only, not in the scene's geometry: docs/scenes.md).
+_SENSED_GROUPS = np.array([int(g != DETAIL_GROUP) for g in range(mujoco.mjNGROUP)], np.uint8)
 
 
 def beam_distance(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, direction: str, exclude_body: int,
@@ -39,7 +42,7 @@ def beam(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, direction: str,
     start = np.array([pose.x + ox * c - oy * s, pose.y + ox * s + oy * c, pose.z + oz])
     heading = np.array([dx * c - dy * s, dx * s + dy * c, dz])
     geom = np.zeros(1, np.int32)
-    hit = mujoco.mj_ray(model, data, start, heading, None, 1, exclude_body, geom)
+    hit = mujoco.mj_ray(model, data, start, heading, _SENSED_GROUPS, 1, exclude_body, geom)
     return (float(hit), int(geom[0])) if 0 <= hit <= max_m else (None, -1)
 
 

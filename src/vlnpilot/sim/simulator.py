@@ -22,6 +22,7 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
 from vlnpilot.core.ranging import RangeReading, range_sensor  # noqa: E402
 from vlnpilot.core.records import Footprint, Motion, Observation, Pose  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
+from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, check_detail  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import drone  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
@@ -49,9 +50,11 @@ class SimConfig:
     visibility_height: int = 120
     sensors: str = "none"  # range sensors the drone carries (vlnpilot.core.ranging.SENSORS): none | tof | multiranger
     range_noise: bool = True  # the sensor's modelled noise on each reading (off: exact ray-cast distances)
+    detail: str = DEFAULT_DETAIL  # scene detail the RGB cameras see (scene/detail.py): plain | rich
 
     def __post_init__(self) -> None:
         range_sensor(self.sensors)  # a bad name is refused here, in one line
+        check_detail(self.detail)
         max_w, max_h = MAX_RESOLUTION
         for w, h, what in ((self.width, self.height, "front"), (self.rear_width, self.rear_height, "rear")):
             if not (16 <= w <= max_w and 16 <= h <= max_h):
@@ -107,7 +110,9 @@ class Simulator:
         self.scene: Scene = load_scene(scene)
         self.config = config or SimConfig()
         xml, assets = scene_to_mjcf(self.scene, bodies=drone.drone_body_xml(), assets_xml=drone.drone_assets_xml(),
-                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows)
+                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows, detail=self.config.detail)
+        self._rgb_option = mujoco.MjvOption()  # the RGB cameras alone show the detail group
+        self._rgb_option.geomgroup[DETAIL_GROUP] = 1
         self.range_sensor = range_sensor(self.config.sensors)
         if self.range_sensor is not None:  # this drone carries range sensors: it says so
             self.capabilities = replace(Simulator.capabilities, range_sensor=self.range_sensor.name)
@@ -340,7 +345,7 @@ class Simulator:
         if depth:
             r.enable_depth_rendering()
         try:
-            r.update_scene(self.data, camera=camera)
+            r.update_scene(self.data, camera=camera, scene_option=None if depth else self._rgb_option)
             return r.render().copy()
         finally:
             if depth:
