@@ -32,6 +32,10 @@ OutOpt = Annotated[Path | None, typer.Option("--out", help="Output directory.")]
 PROFILE_HELP = "FSM profile: paper, fast or ranged (fast, and A2 in Reach Object)."
 SensorsOpt = Annotated[str, typer.Option("--sensors", help="Range sensors the drone carries: none, tof (a RoboMaster "
                                          "TT's forward ToF) or multiranger (Crazyflie Multi-ranger deck).")]
+DetailOpt = Annotated[str | None, typer.Option("--detail", help="Scene detail the cameras render: plain (the "
+                                               "scenes every recorded trial saw; the default) or rich (skirting, "
+                                               "floorboards, switches, handles, pictures, clutter, mirrors that "
+                                               "reflect: docs/scenes.md).")]
 MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PlannerOpt = Annotated[str, typer.Option("--planner", help="Who plans the mission: auto (the pilot, if it plans, "
                                         "unless the instruction is one plain goal), pilot or parser.")]
@@ -78,7 +82,8 @@ def scene_render(scene: SceneOpt = "cabin",
                  spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
                  out: OutOpt = None,
                  width: Annotated[int, typer.Option(min=16, max=960)] = 640,
-                 height: Annotated[int, typer.Option(min=16, max=720)] = 480) -> None:
+                 height: Annotated[int, typer.Option(min=16, max=720)] = 480,
+                 detail: DetailOpt = None) -> None:
     """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan.
 
     Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
@@ -88,7 +93,8 @@ def scene_render(scene: SceneOpt = "cabin",
     from vlnpilot.report.floorplan import save_floorplan
     from vlnpilot.sim import SimConfig, Simulator
 
-    with Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height)) as sim:
+    with Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height,
+                                    detail=detail or "plain")) as sim:
         spawn_id = spawn or sim.scene.spawns[0].id
         sim.scene.spawn(spawn_id)  # validate before creating the output directory
         out_dir = check_writable(out or Path("runs") / f"scene-{sim.scene.name}-{spawn_id}")
@@ -136,6 +142,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
         live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
         planner: PlannerOpt = "auto",
+        detail: DetailOpt = None,
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
@@ -162,6 +169,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     robot = check_robot(robot, tello_host)
     capabilities = robot_capabilities(robot, sensors, tello_host)  # refuses a sensor the drone does not carry
     recorded = recorded_settings(pilot)  # a replay flies as it was flown, unless an option says otherwise
+    detail = _checked_detail(detail or recorded.get("detail") or "plain", robot)
     shield = shield or recorded.get("shield") or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
@@ -171,7 +179,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     sc.spawn(spawn_id)
     profile = profile or recorded.get("profile") or default_profile(forward_range(sensors))
     config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
-                           context=context or recorded.get("context") or DEFAULT_CONTEXT)
+                           context=context or recorded.get("context") or DEFAULT_CONTEXT, detail=detail)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
@@ -198,7 +206,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
-                                        operator=operator, sensors=sensors) as env:
+                                        operator=operator, sensors=sensors, detail=detail) as env:
         try:
             result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
                                           pilot_spec=pilot, overwrite=True,  # claimed above
@@ -212,6 +220,16 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
     console.print(f"run directory: {escape(str(run_dir))}  (report: {_optional_report(run_dir, video=video)})")
     raise typer.Exit(exit_code_for([result.outcome]))
+
+
+def _checked_detail(detail: str, robot: str) -> str:
+    """`--detail`, refused in one line when it is not a choice or the robot renders no scene (a real camera)."""
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.scene.detail import check_detail
+
+    if check_detail(detail) != "plain" and robot != "sim":
+        raise ConfigError(f"--detail {detail} applies to --robot sim (the Tello emulator takes its own --detail)")
+    return detail
 
 
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
@@ -378,7 +396,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 
 
 @app.command("bench")
-def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",
+def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",  # noqa: PLR0913 - one parameter per flag (Typer)
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
           reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,
@@ -402,6 +420,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
               "--frames/--no-frames", help="Record each step's camera frames (front and chase view) for the report's "
               "episode pages (default: with --report; a resumed bench as it started).")] = None,
           sensors: SensorsOpt = "none",
+          detail: DetailOpt = None,
           rate_limit: Annotated[str | None, typer.Option(
               "--rate-limit", help="RPM,TPM: the requests and tokens per minute each provider and model may "
               "take, shared by every worker, until the provider's rate-limit headers say otherwise.")] = None,
@@ -424,6 +443,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     options["context"] = context or pinned_context or DEFAULT_CONTEXT
+    if _checked_detail(detail or "plain", "sim") != "plain":  # plain: benches before --detail hash alike
+        options["detail"] = detail
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=check_base_url(base_url),
@@ -448,6 +469,7 @@ def tello_emulator(scene: SceneOpt = "cabin",
                    drop_seed: Annotated[int, typer.Option("--drop-seed", min=0, help="Seed of which replies are "
                                                           "dropped (the same seed drops the same ones).")] = 0,
                    video_delay: Annotated[float, typer.Option("--video-delay", min=0, max=10, help="s")] = 0.0,
+                   detail: DetailOpt = None,
                    ) -> None:
     """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
     from vlnpilot.core.extras import require
@@ -461,7 +483,8 @@ def tello_emulator(scene: SceneOpt = "cabin",
     if spawn is not None:
         sc.spawn(spawn)  # validate: one line listing the spawns
     config = EmulatorConfig(host=host, port=port, state_port=state_port, video_port=video_port, battery_pct=battery,
-                            drop_replies=drop_replies, video_delay_s=video_delay, seed=drop_seed)
+                            drop_replies=drop_replies, video_delay_s=video_delay, seed=drop_seed,
+                            detail=detail or "plain")
     serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 

@@ -30,8 +30,9 @@ class Robot:
         raise NotImplementedError
 
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
-             sensors: str) -> AbstractContextManager[Any]:
-        """The environment, released when the block ends, whatever happened."""
+             sensors: str, detail: str = "plain") -> AbstractContextManager[Any]:
+        """The environment, released when the block ends, whatever happened. `detail` is what a simulated camera
+        renders (scene/detail.py): a robot that renders no scene ignores it (the command line refuses it there)."""
         raise NotImplementedError
 
 
@@ -46,10 +47,10 @@ class SimRobot(Robot):
         return replace(Simulator.capabilities, range_sensor=wanted.name if wanted else "none"), "sim"
 
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
-             sensors: str) -> AbstractContextManager[Any]:
+             sensors: str, detail: str = "plain") -> AbstractContextManager[Any]:
         from vlnpilot.sim import SimConfig, Simulator
 
-        return Simulator(scene, SimConfig(sensors=sensors))
+        return Simulator(scene, SimConfig(sensors=sensors, detail=detail))
 
 
 class TelloRobot(Robot):
@@ -67,7 +68,7 @@ class TelloRobot(Robot):
 
     @contextmanager
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
-             sensors: str) -> Iterator[Any]:
+             sensors: str, detail: str = "plain") -> Iterator[Any]:
         from vlnpilot.robots.tello import TelloEnv
         from vlnpilot.robots.tello_config import load_tello_config
 
@@ -129,10 +130,10 @@ def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None
 
 @contextmanager
 def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
-               operator: Any = None, sensors: str = "none") -> Iterator[Any]:
+               operator: Any = None, sensors: str = "none", detail: str = "plain") -> Iterator[Any]:
     """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened."""
     with get_robot(robot).open(scene, tello_host=tello_host, event_log=event_log, operator=operator,
-                               sensors=sensors) as env:
+                               sensors=sensors, detail=detail) as env:
         yield env
 
 
