@@ -69,7 +69,7 @@ DETAIL_MATERIALS: tuple[Material, ...] = (
     Material("detail_switch", rgba=(0.97, 0.97, 0.95, 1.0), specular=0.4),
     Material("detail_handle", rgba=(0.80, 0.80, 0.82, 1.0), specular=0.9, shininess=0.8),
     Material("detail_frame", rgba=(0.20, 0.14, 0.09, 1.0), specular=0.3),
-    Material("detail_mirror", rgba=(0.92, 0.94, 0.96, 1.0), specular=0.8, shininess=0.9, reflectance=0.85),
+    Material("detail_mirror", rgba=(0.22, 0.23, 0.25, 1.0), specular=0.3, shininess=0.9, reflectance=0.95),
     *(Material(f"detail_art_{i}", texture=f"art_{i}") for i in range(4)),
     Material("detail_ceramic", rgba=(0.95, 0.95, 0.93, 1.0), specular=0.6, shininess=0.6),
     Material("detail_mug", rgba=(0.20, 0.35, 0.60, 1.0), specular=0.5),

@@ -1,0 +1,138 @@
+"""Cost of the rich scene detail (`--detail rich`, scene/detail.py, docs/scenes.md) and of shadows: one simulator
+step (the motion's collision sweep plus the front and chase renders at 640x480, what `vln-pilot run` does) in each
+configuration, all flying the same commands step by step in one run, so that every configuration sees the same
+poses and the same load on the shared machine:
+
+- `plain`: today's scenes (the default);
+- `rich`: the detail with its reflective mirrors;
+- `rich, mirrors not reflecting`: the same with the mirror material's reflectance set to 0 (the reflection's share);
+- `plain + shadows`: every light casting a 1024 px shadow map (MuJoCo's `castshadow`, `<quality shadowsize>`).
+
+Prints the medians and p90s, each as a multiple of `plain`'s median, the model's build time, and the machine. The
+budget of the detail is 1.2x plain's step. Timing is not a correctness check: the exit code is 0 unless a run fails.
+`--images DIR` also writes the cabin mirror before and after (`mirror-plain.png`, `mirror-rich.png`, docs/scenes.md).
+`--smoke`: 2 steps per spawn of the cabin only, for the tests.
+
+    .venv/bin/python bench/scene_detail_cost.py [--steps 24] [--scenes cabin,house:11?rooms=5] [--images DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import time
+from pathlib import Path
+
+from machine import describe, publish  # bench/machine.py, beside this script
+
+from vlnpilot.core.commands import get_command
+from vlnpilot.core.records import Pose
+from vlnpilot.sim import SimConfig, Simulator  # selects the headless GL backend before mujoco loads
+
+SEQUENCE = ("A1", "B1", "A2", "C2", "D1", "A1", "D2", "C1", "A3", "B2", "E", "A1", "C3", "A2", "B1", "A1")
+BUDGET = 1.2  # rich's median step as a multiple of plain's
+SHADOW_SIZE = 1024
+MIRROR_VIEW = Pose(4.55, 1.9, 1.0, 25.0)  # the cabin's bedroom: the bed, a lamp and the full-length mirror
+OUT = Path(__file__).resolve().parent / "results" / "scene_detail_cost.md"
+
+
+def _simulators(scene: str) -> dict[str, Simulator]:
+    """The four configurations; the shadow map and the reflectance are set on the model before any renderer exists."""
+    import mujoco
+
+    sims = {"plain": Simulator(scene), "rich": Simulator(scene, SimConfig(detail="rich")),
+            "rich, mirrors not reflecting": Simulator(scene, SimConfig(detail="rich")),
+            "plain + shadows": Simulator(scene)}
+    dull = sims["rich, mirrors not reflecting"].model
+    dull.mat_reflectance[mujoco.mj_name2id(dull, mujoco.mjtObj.mjOBJ_MATERIAL, "detail_mirror")] = 0.0
+    shadowed = sims["plain + shadows"].model
+    shadowed.vis.quality.shadowsize = SHADOW_SIZE
+    shadowed.light_castshadow[:] = 1
+    return sims
+
+
+def measure(scene: str, steps: int) -> tuple[dict[str, list[float]], dict[str, float]]:
+    """Step times (s) per configuration, interleaved step by step, and each configuration's model build time (s)."""
+    build: dict[str, float] = {}
+    Simulator(scene).close()  # the textures, generated once per process, are not a build's cost
+    for detail in ("plain", "rich"):
+        t0 = time.perf_counter()
+        Simulator(scene, SimConfig(detail=detail)).close()
+        build[detail] = time.perf_counter() - t0
+    sims = _simulators(scene)
+    times: dict[str, list[float]] = {key: [] for key in sims}
+    try:
+        for spawn in sims["plain"].scene.spawns:
+            for sim in sims.values():
+                sim.reset(spawn)
+                sim.step("E")  # warm-up: renderers and GL contexts exist before anything is timed
+                sim.reset(spawn)
+            for i in range(steps):
+                cmd = get_command(SEQUENCE[i % len(SEQUENCE)])
+                collided = False
+                for key, sim in sims.items():
+                    t0 = time.perf_counter()
+                    obs = sim.step(cmd)
+                    times[key].append(time.perf_counter() - t0)
+                    collided = obs.collided  # the same geometry everywhere: all collide alike
+                if collided:
+                    for sim in sims.values():
+                        sim.reset(spawn)
+    finally:
+        for sim in sims.values():
+            sim.close()
+    return times, build
+
+
+def p90(values: list[float]) -> float:
+    return statistics.quantiles(values, n=10)[-1] if len(values) > 1 else values[0]
+
+
+def table(scene: str, times: dict[str, list[float]], build: dict[str, float]) -> str:
+    base = statistics.median(times["plain"])
+    lines = [f"### {scene}", "", f"{len(times['plain'])} steps per configuration; model build: plain "
+             f"{build['plain'] * 1000:.0f} ms, rich {build['rich'] * 1000:.0f} ms", "",
+             "| configuration | median step (ms) | p90 (ms) | x plain |", "| --- | ---: | ---: | ---: |"]
+    for key, values in times.items():
+        med = statistics.median(values)
+        lines.append(f"| {key} | {med * 1000:.1f} | {p90(values) * 1000:.1f} | {med / base:.2f} |")
+    ratio = statistics.median(times["rich"]) / base
+    lines += ["", f"rich / plain = {ratio:.2f} ({'within' if ratio <= BUDGET else 'OVER'} the {BUDGET}x budget)", ""]
+    return "\n".join(lines)
+
+
+def write_images(out: Path) -> None:
+    """The cabin's mirror seen from the bedroom, plain and rich (docs/scenes.md)."""
+    from PIL import Image
+
+    out.mkdir(parents=True, exist_ok=True)
+    for detail in ("plain", "rich"):
+        with Simulator("cabin", SimConfig(detail=detail)) as sim:
+            Image.fromarray(sim.reset(MIRROR_VIEW).front_rgb).save(out / f"mirror-{detail}.png", optimize=True)
+        print(f"wrote {out / f'mirror-{detail}.png'}")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--steps", type=int, default=24, help="steps per spawn")
+    parser.add_argument("--scenes", default="cabin,house:11?rooms=5")
+    parser.add_argument("--images", type=Path, default=None, help="write the mirror before/after PNGs here")
+    parser.add_argument("--smoke", action="store_true")
+    args = parser.parse_args()
+    steps, scenes = (2, ["cabin"]) if args.smoke else (args.steps, args.scenes.split(","))
+    parts = ["# Scene detail and shadows: the cost of a step (bench/scene_detail_cost.py)", "",
+             f"Machine: {describe()}", "",
+             "A step: the collision sweep and the front and chase renders at 640x480.", ""]
+    for scene in scenes:
+        parts.append(table(scene, *measure(scene, steps)))
+    text = "\n".join(parts)
+    if args.smoke:
+        print(text)
+    else:
+        publish(text, OUT)
+    if args.images:
+        write_images(args.images)
+
+
+if __name__ == "__main__":
+    main()
