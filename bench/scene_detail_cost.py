@@ -8,6 +8,10 @@ poses and the same load on the shared machine:
 - `rich, mirrors not reflecting`: the same with the mirror material's reflectance set to 0 (the reflection's share);
 - `plain + shadows`: every light casting a 1024 px shadow map (MuJoCo's `castshadow`, `<quality shadowsize>`).
 
+It also measures what the target visibility would lose if it counted the detail (it does not: the segmentation
+renders without the detail group): the share of each target's pixels that the detail hides, seen from 0.9 m in
+front of it (inside the monitor's 1 m), at the segmentation's 160x120.
+
 Prints the medians and p90s, each as a multiple of `plain`'s median, the model's build time, and the machine. The
 budget of the detail is 1.2x plain's step. Timing is not a correctness check: the exit code is 0 unless a run fails.
 `--images DIR` also writes the cabin mirror before and after (`mirror-plain.png`, `mirror-rich.png`, docs/scenes.md).
@@ -33,6 +37,7 @@ SEQUENCE = ("A1", "B1", "A2", "C2", "D1", "A1", "D2", "C1", "A3", "B2", "E", "A1
 BUDGET = 1.2  # rich's median step as a multiple of plain's
 SHADOW_SIZE = 1024
 MIRROR_VIEW = Pose(4.55, 1.9, 1.0, 25.0)  # the cabin's bedroom: the bed, a lamp and the full-length mirror
+HIDDEN_SCENES = ("cabin", "house:11?rooms=5", "house:43?rooms=6", "house:7?rooms=4")
 OUT = Path(__file__).resolve().parent / "results" / "scene_detail_cost.md"
 
 
@@ -84,6 +89,45 @@ def measure(scene: str, steps: int) -> tuple[dict[str, list[float]], dict[str, f
     return times, build
 
 
+def hidden_by_detail(scene: str) -> list[tuple[str, float]]:
+    """(target, share of its segmentation pixels the detail hides) from 0.9 m in front of each target (a mirror's
+    reflective face counts as the mirror)."""
+    import math
+
+    import mujoco
+    import numpy as np
+
+    from vlnpilot.scene.detail import DETAIL_GROUP, PREFIX
+    from vlnpilot.sim import drone
+
+    out = []
+    with Simulator(scene, SimConfig(detail="rich", render=False)) as sim:
+        renderer = mujoco.Renderer(sim.model, 120, 160)
+        renderer.enable_segmentation_rendering()
+        option = mujoco.MjvOption()
+        option.geomgroup[DETAIL_GROUP] = 1
+        try:
+            for target in sim.scene.targets:
+                a = math.radians(target.facing_deg)
+                pose = Pose(target.position[0] + 0.9 * math.cos(a), target.position[1] + 0.9 * math.sin(a),
+                            sim.scene.flight_altitude, target.facing_deg + 180.0)
+                if sim.contact_at(pose) is not None:
+                    continue
+                sim.reset(pose)
+                own = {f"{PREFIX}mirror_{s.name}" for s in sim.scene.solids if s.target == target.id}
+                ids = [*sim.target_geoms[target.id], *(g for g in range(sim.model.ngeom) if sim.geom_name(g) in own)]
+                seen = []
+                for opt in (None, option):
+                    renderer.update_scene(sim.data, camera=drone.FRONT_CAMERA, scene_option=opt)
+                    seg = renderer.render()
+                    seen.append(int(np.isin(seg[..., 0], ids).sum()))
+                if seen[0]:
+                    out.append((target.id, 1.0 - seen[1] / seen[0]))
+        finally:
+            renderer.close()
+    return out
+
+
 def p90(values: list[float]) -> float:
     return statistics.quantiles(values, n=10)[-1] if len(values) > 1 else values[0]
 
@@ -125,6 +169,11 @@ def main() -> None:
              "A step: the collision sweep and the front and chase renders at 640x480.", ""]
     for scene in scenes:
         parts.append(table(scene, *measure(scene, steps)))
+    hidden = [(scene, *row) for scene in (["cabin"] if args.smoke else HIDDEN_SCENES)
+              for row in hidden_by_detail(scene)]
+    parts += ["### Target pixels the detail would hide (from 0.9 m in front; the monitor does not count it)", "",
+              "| scene | target | hidden |", "| --- | --- | ---: |",
+              *(f"| {scene} | {target} | {share:.1%} |" for scene, target, share in hidden), ""]
     text = "\n".join(parts)
     if args.smoke:
         print(text)

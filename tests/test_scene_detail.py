@@ -19,6 +19,7 @@ from vlnpilot.scene import detail as D
 from vlnpilot.scene import load_scene
 from vlnpilot.scene.mjcf import scene_to_mjcf
 from vlnpilot.sim import SimConfig, Simulator, drone
+from vlnpilot.sim.mirrors import reflect_in_view
 
 # sha256 (first 16 hex) of the MJCF text and its textures, with the drone, as the scenes were before --detail:
 # `plain` must keep them, so every recorded trial replays in the scene it saw.
@@ -152,3 +153,43 @@ def test_a_rich_run_records_its_detail_and_its_replay_renders_it(monkeypatch: py
     config = {d.name: json.loads((d / "summary.json").read_text())["config"] for d in (flown, replayed, plain)}
     assert config["flown"]["detail"] == config["replayed"]["detail"] == "rich"
     assert "detail" not in config["plain"]  # plain runs record what they recorded before
+
+
+def _mirror_views(sim: Simulator) -> list[Pose]:
+    """A pose 1.3 m in front of each reflective plane, facing it."""
+    rich = D.with_detail(sim.scene, "rich")
+    views = []
+    for p in (s for s in rich.solids if s.name.startswith(D.PREFIX + "mirror")):
+        nx, ny = p.xyaxes[1], -p.xyaxes[0]  # x cross up
+        views.append(Pose(p.pos[0] + 1.3 * nx, p.pos[1] + 1.3 * ny, 1.0,
+                          float(np.degrees(np.arctan2(-ny, -nx)))))
+    return views
+
+
+def test_every_mirror_in_view_reflects_and_a_frame_without_one_reflects_none() -> None:
+    """MuJoCo reflects one geom a frame; sim/mirrors.py gives that reflection to the mirror in view."""
+    with Simulator("house:11?rooms=5", SimConfig(detail="rich", rear_camera=False, width=160, height=120)) as sim:
+        views = _mirror_views(sim)
+        assert len(views) == 2  # the bathroom's vanity mirror and the bedroom's full-length one
+        material = mujoco.mj_name2id(sim.model, mujoco.mjtObj.mjOBJ_MATERIAL, "detail_mirror")
+        for pose in views:
+            reflecting = sim.reset(pose).front_rgb
+            sim.model.mat_reflectance[material] = 0.0
+            glass = sim.render()
+            sim.model.mat_reflectance[material] = 0.95
+            assert np.abs(reflecting.astype(int) - glass.astype(int)).mean() > 2.0, pose
+        sim.reset(Pose(views[1].x, views[1].y, 1.0, views[1].yaw_deg + 180.0))  # the mirror behind the drone
+        renderer = sim._renderer(160, 120)
+        renderer.update_scene(sim.data, camera=drone.FRONT_CAMERA, scene_option=sim._rgb_option)
+        reflect_in_view(renderer.scene, sim._mirrors, 160 / 120, (sim.model, sim.data, sim._body_id))
+        assert all(renderer.scene.geoms[i].reflectance == 0 for i in range(renderer.scene.ngeom))
+
+
+@pytest.mark.parametrize("pose", [Pose(4.5, 1.2, 1.0, 10.0), Pose(4.3, 3.3, 1.0, 10.0), Pose(4.3, 3.3, 1.0, -60.0),
+                                  MIRROR_VIEW])
+def test_a_mirror_at_the_edge_of_the_view_still_reflects(pose: Pose) -> None:
+    """The cabin's one mirror: the frame is MuJoCo's own (which always reflects it) wherever the mirror shows."""
+    with Simulator("cabin", SimConfig(detail="rich", rear_camera=False)) as culled, \
+            Simulator("cabin", SimConfig(detail="rich", rear_camera=False)) as always:
+        always._mirrors = frozenset()
+        np.testing.assert_array_equal(culled.reset(pose).front_rgb, always.reset(pose).front_rgb)

@@ -25,7 +25,7 @@ from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, check_detail  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import drone  # noqa: E402
-from vlnpilot.sim.mirrors import mirror_geoms, reflect_nearest  # noqa: E402
+from vlnpilot.sim.mirrors import mirror_geoms, reflect_in_view  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
@@ -119,7 +119,7 @@ class Simulator:
             self.capabilities = replace(Simulator.capabilities, range_sensor=self.range_sensor.name)
         self.model = mujoco.MjModel.from_xml_string(xml, assets)
         self.data = mujoco.MjData(self.model)
-        self._mirrors = mirror_geoms(self.model)  # MuJoCo reflects one per frame: the nearest (sim/mirrors.py)
+        self._mirrors = mirror_geoms(self.model)  # a frame reflects the nearest in view, if any (sim/mirrors.py)
         m = self.model
         self._qpos_adr = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, drone.JOINT)]
         body_id = self._body_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, drone.BODY)
@@ -348,8 +348,9 @@ class Simulator:
             r.enable_depth_rendering()
         try:
             r.update_scene(self.data, camera=camera, scene_option=None if depth else self._rgb_option)
-            if len(self._mirrors) > 1:
-                reflect_nearest(r.scene, self._mirrors)
+            if self._mirrors and not depth:
+                reflect_in_view(r.scene, self._mirrors, w / h, (self.model, self.data, self._body_id),
+                                keep=front)  # the chase view: no reflection pass
             return r.render().copy()
         finally:
             if depth:
