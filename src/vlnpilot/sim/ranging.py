@@ -1,7 +1,8 @@
 """The range sensors (`vlnpilot.core.ranging.SENSORS`) simulated by MuJoCo ray casts from the drone's pose.
 
 Each beam starts at the drone's centre plane, at its skin in the beam's direction (the front beam at the camera's
-lens), and ignores the drone's own geoms; visual-only geoms (pictures, rugs) reflect a beam as they would a laser.
+lens), and ignores the drone's own geoms; visual-only geoms (pictures, rugs) reflect a beam as they would a laser,
+except the rich detail of `--detail rich` (scene/detail.py), which is not in the scene's geometry.
 """
 
 from __future__ import annotations
