@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 from tests.cli_support import run_main
 
+from vlnpilot.bench.command import bench_command
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.records import Pose
 from vlnpilot.episode.config import EpisodeConfig
@@ -19,6 +20,8 @@ from vlnpilot.scene import detail as D
 from vlnpilot.scene import load_scene
 from vlnpilot.scene.mjcf import scene_to_mjcf
 from vlnpilot.sim import SimConfig, Simulator, drone
+from vlnpilot.sim.gym_env import CabinEnv
+from vlnpilot.sim.house_env import HouseEnv
 from vlnpilot.sim.mirrors import reflect_in_view
 
 # sha256 (first 16 hex) of the MJCF text and its textures, with the drone, as the scenes were before --detail:
@@ -134,10 +137,24 @@ def test_a_bad_detail_is_refused_in_one_line(monkeypatch: pytest.MonkeyPatch, ca
         with pytest.raises(ConfigError, match=r"unknown detail 'fancy'; valid: plain, rich"):
             make()
     for args in (("run", "go to the bathroom", "--pilot", "oracle", "--detail", "fancy", "--out", str(tmp_path / "r")),
-                 ("bench", "--detail", "fancy", "--out", str(tmp_path / "b")), ("scene", "render", "--detail", "HD")):
+                 ("bench", "--detail", "fancy", "--out", str(tmp_path / "b")), ("scene", "render", "--detail", "HD"),
+                 ("tello-emulator", "--detail", "HD", "--port", "18889")):
         code, _, err = run_main(monkeypatch, capsys, *args)
         assert code == 2 and len(err.strip().splitlines()) == 1 and "valid: plain, rich" in err, (args, err)
-    assert not (tmp_path / "r").exists() and not (tmp_path / "b").exists()
+    code, _, err = run_main(monkeypatch, capsys, "run", "go to the bathroom", "--robot", "tello", "--detail", "rich",
+                            "--out", str(tmp_path / "t"))
+    assert code == 2 and "--detail rich applies to --robot sim" in err, err  # a real camera sees the real room
+    with pytest.raises(ConfigError, match="valid: plain, rich"):  # the library refuses it before anything flies
+        bench_command(suite="paper", pilots="oracle", out=tmp_path / "lib", episode_options={"detail": "4k"})
+    assert not any((tmp_path / d).exists() for d in ("r", "b", "t", "lib"))
+
+
+def test_the_gym_environments_take_the_detail() -> None:
+    for env in (CabinEnv(detail="rich", width=64, height=48), HouseEnv(7, 4, detail="rich", width=64, height=48)):
+        env.reset(seed=0)
+        sim = env.unwrapped.sim if isinstance(env, CabinEnv) else env._env.sim
+        assert sim.config.detail == "rich" and (sim.model.geom_group == D.DETAIL_GROUP).sum() > 20
+        env.close()
 
 
 def test_a_rich_run_records_its_detail_and_its_replay_renders_it(monkeypatch: pytest.MonkeyPatch,

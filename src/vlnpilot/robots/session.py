@@ -131,9 +131,10 @@ def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None
 @contextmanager
 def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
                operator: Any = None, sensors: str = "none", detail: str = "plain") -> Iterator[Any]:
-    """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened."""
+    """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened. `detail`
+    reaches `open` only when it is not plain: a robot registered before it existed opens as it did."""
     with get_robot(robot).open(scene, tello_host=tello_host, event_log=event_log, operator=operator,
-                               sensors=sensors, detail=detail) as env:
+                               sensors=sensors, **({"detail": detail} if detail != "plain" else {})) as env:
         yield env
 
 

@@ -26,10 +26,10 @@ class HouseEnv(gym.Env):
     metadata = CabinEnv.metadata
 
     def __init__(self, house: int = 0, rooms: int | None = None, *, max_steps: int = 150, width: int = 640,
-                 height: int = 480, render_mode: str | None = None, sensors: str = "none"):
+                 height: int = 480, render_mode: str | None = None, sensors: str = "none", detail: str = "plain"):
         self._spec = HouseSpec(int(house), rooms)
         self._kwargs: dict[str, Any] = {"max_steps": max_steps, "width": width, "height": height,
-                                        "render_mode": render_mode, "sensors": sensors}
+                                        "render_mode": render_mode, "sensors": sensors, "detail": detail}
         self.render_mode = render_mode
         self._env: CabinEnv | None = None
         self.action_space = spaces.Discrete(len(COMMANDS))
