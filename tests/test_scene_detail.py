@@ -11,6 +11,7 @@ import mujoco
 import numpy as np
 import pytest
 from tests.cli_support import run_main
+from tests.tello_support import rig
 
 from vlnpilot.bench.command import bench_command
 from vlnpilot.core.errors import ConfigError
@@ -210,3 +211,12 @@ def test_a_mirror_at_the_edge_of_the_view_still_reflects(pose: Pose) -> None:
             Simulator("cabin", SimConfig(detail="rich", rear_camera=False)) as always:
         always._mirrors = frozenset()
         np.testing.assert_array_equal(culled.reset(pose).front_rgb, always.reset(pose).front_rgb)
+
+
+def test_the_tello_emulator_streams_the_detail_it_is_given() -> None:
+    """`vln-pilot tello-emulator --detail rich`: the video the Tello backend receives shows the rich scene."""
+    frames = {}
+    for detail in ("plain", "rich"):
+        with rig(spawn="bedroom", emulator={"detail": detail}) as (_, env):
+            frames[detail] = env.reset("bedroom").front_rgb.astype(int)
+    assert np.abs(frames["rich"] - frames["plain"]).mean() > 2.0
