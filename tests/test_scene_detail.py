@@ -10,9 +10,9 @@ import json
 import mujoco
 import numpy as np
 import pytest
-from tests.cli_support import run_main
-from tests.tello_support import rig
 
+from cli_support import run_main
+from tello_support import loopback_only, rig  # noqa: F401  (loopback_only: the autouse guard)
 from vlnpilot.bench.command import bench_command
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.records import Pose
