@@ -65,7 +65,7 @@ def test_rich_adds_only_visual_geoms_in_the_detail_group_and_changes_no_solid(sc
                       "geom_group"):
             np.testing.assert_array_equal(getattr(rich, field)[r], getattr(plain, field)[g], err_msg=f"{n} {field}")
     kinds = {n.removeprefix(D.PREFIX).split("_")[0] for n in added}
-    assert {"skirting", "switch", "handle", "picture", "mirror"} <= kinds
+    assert {"skirting", "architrave", "switch", "handle", "picture", "mirror"} <= kinds
     assert kinds & {"books", "cup", "bowl", "board", "lamp"}, kinds  # clutter on some surface
 
 
@@ -92,6 +92,8 @@ def test_the_detail_has_its_documented_real_world_sizes() -> None:
     assert len(plates) == 5  # both sides of the two open doorways, and inside the front door
     assert all(abs(s.pos[2] - D.SWITCH_Z) < 1e-9 and abs(2 * s.size[2] - D.SWITCH_PLATE) < 1e-9 for s in plates)
     assert all(abs(s.pos[2] - D.HANDLE_Z) < 1e-9 for s in of("handle"))
+    heads = [s for s in of("architrave") if s.name.endswith("_top")]
+    assert len(heads) == 5 and all(abs(2 * s.size[2] - D.ARCHITRAVE_W) < 1e-9 for s in heads)  # as the switches
     floors = {m.name: m for m in rich.materials}
     r = floors["floor_living"].texrepeat[0]  # a texture spans 2 / texrepeat metres: 8 boards of 14 cm
     assert floors["floor_living"].texture == "floor_planks" and abs(2 / r / D.PLANKS_PER_TEXTURE - 0.14) < 1e-3

@@ -32,7 +32,8 @@ PREFIX = "detail_"
 SKIRTING_H, SKIRTING_T = 0.08, 0.012
 PLANK_W, PLANKS_PER_TEXTURE = 0.14, 8
 FLOOR_TILE, WALL_TILE = 0.30, 0.15
-SWITCH_Z, SWITCH_PLATE, SWITCH_FROM_JAMB = 1.10, 0.08, 0.15
+SWITCH_Z, SWITCH_PLATE, SWITCH_FROM_OPENING = 1.10, 0.08, 0.22  # plate centre from the opening's edge
+ARCHITRAVE_W, ARCHITRAVE_T, REVEAL = 0.07, 0.012, 0.006  # door casing trim: width, how proud, set back from the jamb
 HANDLE_Z, HANDLE_L = 1.00, 0.12
 PICTURE_Z = 1.50  # centre height
 PICTURE_SIZES = ((0.40, 0.30), (0.50, 0.40), (0.60, 0.45), (0.30, 0.40), (0.70, 0.50))
@@ -66,6 +67,7 @@ _SCALED = {
 
 DETAIL_MATERIALS: tuple[Material, ...] = (
     Material("detail_skirting", rgba=(0.95, 0.94, 0.90, 1.0), specular=0.3),
+    Material("detail_architrave", rgba=(0.97, 0.96, 0.93, 1.0), specular=0.3),
     Material("detail_switch", rgba=(0.97, 0.97, 0.95, 1.0), specular=0.4),
     Material("detail_handle", rgba=(0.80, 0.80, 0.82, 1.0), specular=0.9, shininess=0.8),
     Material("detail_frame", rgba=(0.20, 0.14, 0.09, 1.0), specular=0.3),
@@ -87,7 +89,7 @@ def with_detail(scene: Scene, detail: str = DEFAULT_DETAIL) -> Scene:
     if check_detail(detail) == "plain":
         return scene
     rng = random.Random(zlib.crc32(scene.name.encode("utf-8")))
-    parts = skirting(scene) + switches(scene) + handles(scene) + mirrors(scene)
+    parts = skirting(scene) + architraves(scene) + switches(scene) + handles(scene) + mirrors(scene)
     parts += pictures(scene, rng, parts)
     parts += clutter(scene, rng, parts)
     return replace(scene, solids=scene.solids + tuple(parts), materials=_materials(scene) + DETAIL_MATERIALS)
@@ -181,7 +183,7 @@ def switches(scene: Scene) -> list[Solid]:
     out = []
     for door in scene.doors:
         hinge = _hinge_side(scene, door)
-        lateral = -hinge * (door.width / 2 + SWITCH_FROM_JAMB)
+        lateral = -hinge * (door.width / 2 + SWITCH_FROM_OPENING)
         for k, room in enumerate(door.rooms):
             if room == EXTERIOR:
                 continue
@@ -197,6 +199,34 @@ def switches(scene: Scene) -> list[Solid]:
                                  SWITCH_Z - h, SWITCH_Z + h, "detail_switch"))
             out.append(_wall_box(f"{PREFIX}switch_{door.id}_{room}_rocker", skin, ax, n, along - 0.012,
                                  along + 0.012, 0.01, 0.016, SWITCH_Z - 0.02, SWITCH_Z + 0.02, "detail_switch"))
+    return out
+
+
+def architraves(scene: Scene) -> list[Solid]:
+    """A casing trim ARCHITRAVE_W wide around every doorway on each side that is a room, ARCHITRAVE_T proud of the
+    frame and set REVEAL back from the opening: the edge that tells a jamb's inner face from the casing."""
+    out = []
+    for door in scene.doors:
+        frame = next((x for x in scene.solids if x.name == f"{door.id}_frame_left"), None)
+        if frame is None:
+            continue
+        half_d = frame.size[0] if abs(door.normal[0]) > 0.5 else frame.size[1]
+        centre = door.frame_of(frame.pos[0], frame.pos[1])[0]
+        inner, outer = door.width / 2 + REVEAL, door.width / 2 + REVEAL + ARCHITRAVE_W
+        low, high = door.height + REVEAL, door.height + REVEAL + ARCHITRAVE_W  # the head, above the opening
+        for k, room in enumerate(door.rooms):
+            if room == EXTERIOR:
+                continue
+            sign = -1.0 if k == 0 else 1.0
+            d0 = centre + sign * half_d
+            d1 = d0 + sign * ARCHITRAVE_T
+            name = f"{PREFIX}architrave_{door.id}_{room}"
+            out += [_door_box(door, f"{name}_left", d0, d1, inner, outer, 0.0, high, "detail_architrave",
+                              collide=False),
+                    _door_box(door, f"{name}_right", d0, d1, -outer, -inner, 0.0, high, "detail_architrave",
+                              collide=False),
+                    _door_box(door, f"{name}_top", d0, d1, -outer, outer, low, high, "detail_architrave",
+                              collide=False)]
     return out
 
 
