@@ -40,6 +40,10 @@ CameraLagOpt = Annotated[float | None, typer.Option("--camera-lag-ms", min=0, ma
 RandomizeOpt = Annotated[int | None, typer.Option("--randomize", min=0, max=2**31 - 1, help="Domain randomisation "
                                                  "seed: lights, paints, texture scale, camera height, exposure "
                                                  "(docs/camera.md).")]
+DetailOpt = Annotated[str | None, typer.Option("--detail", help="Scene detail the cameras render: plain (the "
+                                               "scenes every recorded trial saw; the default) or rich (skirting, "
+                                               "floorboards, switches, handles, pictures, clutter, mirrors that "
+                                               "reflect: docs/scenes.md).")]
 MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PlannerOpt = Annotated[str, typer.Option("--planner", help="Who plans the mission: auto (the pilot, if it plans, "
                                         "unless the instruction is one plain goal), pilot or parser.")]
@@ -86,7 +90,8 @@ def scene_render(scene: SceneOpt = "cabin",
                  spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
                  out: OutOpt = None,
                  width: Annotated[int, typer.Option(min=16, max=960)] = 640,
-                 height: Annotated[int, typer.Option(min=16, max=720)] = 480) -> None:
+                 height: Annotated[int, typer.Option(min=16, max=720)] = 480,
+                 detail: DetailOpt = None) -> None:
     """Write front.png and rear.png from a spawn point, and map.png, a top-down floor plan.
 
     Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
@@ -96,7 +101,8 @@ def scene_render(scene: SceneOpt = "cabin",
     from vlnpilot.report.floorplan import save_floorplan
     from vlnpilot.sim import SimConfig, Simulator
 
-    with Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height)) as sim:
+    with Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height,
+                                    detail=detail or "plain")) as sim:
         spawn_id = spawn or sim.scene.spawns[0].id
         sim.scene.spawn(spawn_id)  # validate before creating the output directory
         out_dir = check_writable(out or Path("runs") / f"scene-{sim.scene.name}-{spawn_id}")
@@ -147,6 +153,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         camera: CameraOpt = None,
         camera_lag_ms: CameraLagOpt = None,
         randomize: RandomizeOpt = None,
+        detail: DetailOpt = None,
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
@@ -174,6 +181,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     capabilities = robot_capabilities(robot, sensors, tello_host)  # refuses a sensor the drone does not carry
     recorded = recorded_settings(pilot)  # a replay flies as it was flown, unless an option says otherwise
     camera, camera_lag_ms, randomize = _imaging(robot, pilot, recorded, camera, camera_lag_ms, randomize)
+    detail = _checked_detail(detail or recorded.get("detail") or "plain", robot)
     shield = shield or recorded.get("shield") or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
@@ -183,7 +191,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     sc.spawn(spawn_id)
     profile = profile or recorded.get("profile") or default_profile(forward_range(sensors))
     config = EpisodeConfig(max_steps=max_steps, seed=seed, profile=profile, shield=shield, overlay=overlay,
-                           context=context or recorded.get("context") or DEFAULT_CONTEXT)
+                           context=context or recorded.get("context") or DEFAULT_CONTEXT, detail=detail)
     if pilot is None:
         pilot, why = default_pilot_spec()
         console.print(f"pilot: [bold]{pilot}[/bold] ({why})")
@@ -211,7 +219,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
                                         operator=operator, sensors=sensors, camera=camera,
-                                        camera_lag_ms=camera_lag_ms, randomize=randomize) as env:
+                                        camera_lag_ms=camera_lag_ms, randomize=randomize, detail=detail) as env:
         try:
             result = run_recorded_episode(env, pilot_obj, task, config, run_dir=run_dir, spawn=spawn_id,
                                           pilot_spec=pilot, overwrite=True,  # claimed above
@@ -246,6 +254,14 @@ def _imaging(robot: str, pilot: str | None, recorded: dict[str, str], camera: st
 
         check_replay_camera(pilot, camera_flown_with(camera, lag_ms, randomize))
     return camera, lag_ms, randomize
+def _checked_detail(detail: str, robot: str) -> str:
+    """`--detail`, refused in one line when it is not a choice or the robot renders no scene (a real camera)."""
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.scene.detail import check_detail
+
+    if check_detail(detail) != "plain" and robot != "sim":
+        raise ConfigError(f"--detail {detail} applies to --robot sim (the Tello emulator takes its own --detail)")
+    return detail
 
 
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
@@ -436,6 +452,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
               "--frames/--no-frames", help="Record each step's camera frames (front and chase view) for the report's "
               "episode pages (default: with --report; a resumed bench as it started).")] = None,
           sensors: SensorsOpt = "none",
+          detail: DetailOpt = None,
           rate_limit: Annotated[str | None, typer.Option(
               "--rate-limit", help="RPM,TPM: the requests and tokens per minute each provider and model may "
               "take, shared by every worker, until the provider's rate-limit headers say otherwise.")] = None,
@@ -465,6 +482,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     options["context"] = context or pinned_context or DEFAULT_CONTEXT
+    if _checked_detail(detail or "plain", "sim") != "plain":  # plain: benches before --detail hash alike
+        options["detail"] = detail
     if estimate:
         from vlnpilot.bench.estimate import estimate_command
 
@@ -500,6 +519,7 @@ def tello_emulator(scene: SceneOpt = "cabin",
                                                        "sends; its lag is --video-delay) or ideal (the renders); "
                                                        "docs/camera.md.")] = "tello",
                    randomize: RandomizeOpt = None,
+                   detail: DetailOpt = None,
                    ) -> None:
     """A Tello SDK 2.0 peer on loopback (commands 8889, state to 8890, H.264 to 11111) flying the simulated drone."""
     from vlnpilot.core.extras import require
@@ -514,7 +534,7 @@ def tello_emulator(scene: SceneOpt = "cabin",
         sc.spawn(spawn)  # validate: one line listing the spawns
     config = EmulatorConfig(host=host, port=port, state_port=state_port, video_port=video_port, battery_pct=battery,
                             drop_replies=drop_replies, video_delay_s=video_delay, seed=drop_seed, camera=camera,
-                            randomize=randomize)
+                            randomize=randomize, detail=detail or "plain")
     serve_emulator(scene, spawn, config, say=lambda text: console.print(escape(text), highlight=False))
 
 

@@ -13,6 +13,7 @@ from vlnpilot.bench.suite import suite_pins
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.ranging import range_sensor
 from vlnpilot.pilots.ratelimit import parse_rate_limit
+from vlnpilot.scene.detail import check_detail
 
 
 def _checked_sensors(name: str) -> str:
@@ -61,6 +62,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         raise BenchError(f"--resume --out {out}: there is no bench there to resume (no {MANIFEST}); give the "
                          "directory of an earlier bench, or drop --resume to start one")
     options = _with_pins(suite, shield, dict(episode_options or {}))
+    check_detail(options.get("detail", "plain"))  # a bad value: one line, before anything runs
     if frames is None:  # a resumed bench goes on as it started (the choice is in its config hash)
         manifest = read_manifest(out) if resume else None
         frames = bool(manifest["config"].get("save_frames", True)) if manifest else True

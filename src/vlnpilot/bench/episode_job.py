@@ -73,14 +73,15 @@ class SimulatorCache:
         self._lock = threading.Lock()
 
     def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",  # noqa: PLR0913
-            rear_camera: bool = True, camera: str = "ideal", randomize: int | None = None) -> Any:
+            rear_camera: bool = True, camera: str = "ideal", randomize: int | None = None,
+            detail: str = "plain") -> Any:
         from vlnpilot.sim import SimConfig, Simulator
 
         sims = getattr(self._local, "sims", None)
         if sims is None:
             sims = self._local.sims = {}
         key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors,
-                                rear_camera=rear_camera, camera=camera, randomize=randomize))
+                                rear_camera=rear_camera, camera=camera, randomize=randomize, detail=detail))
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
@@ -157,14 +158,14 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
 
     frames = spec.save_frames and spec.render
     # the chase camera is seen only in the recorded frames (the episode pages of the report): without them, not rendered
+    config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors,
-                         rear_camera=frames, camera=spec.camera, randomize=spec.randomize)
+                         rear_camera=frames, camera=spec.camera, randomize=spec.randomize, detail=config.detail)
     share_budgets(spec.rate_dir, parse_rate_limit(spec.rate_limit))  # before the pilot: it takes its budget
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
     if run_dir.exists():  # a leftover of an interrupted attempt: the rerun starts clean
         shutil.rmtree(run_dir)
-    config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
     task = (Mission.from_dict(spec.mission) if spec.mission is not None
             else Task(query=spec.query, goal_room=spec.goal_room, goal_target=spec.goal_target))
     result = run_recorded_episode(sim, pilot, task, config, run_dir=run_dir, spawn=spec.spawn,

@@ -15,6 +15,7 @@ from vlnpilot.core.fsm import PROFILES, State
 from vlnpilot.pilots.base import Pilot
 from vlnpilot.prompting.context import ContextConfig, context_preset
 from vlnpilot.safety import OVERLAYS, SHIELD_REGISTRY, SafetyConfig
+from vlnpilot.scene.detail import DEFAULT_DETAIL, check_detail
 from vlnpilot.tasks.task import SuccessConfig, Task
 
 __all__ = ["OUTCOMES", "EpisodeConfig", "Gate", "JudgeOutcome", "LoopControl"]
@@ -43,6 +44,9 @@ class EpisodeConfig:
     step_deadline_s: float | None = 120.0
     # What the pilot is told beyond the paper's five inputs (prompting.context): a preset name or a ContextConfig.
     context: ContextConfig | str = "paper"
+    # The scene detail the simulator's cameras render (scene/detail.py): plain | rich. The run opens its simulator
+    # with it, and it is recorded so that a replay renders the same images; it changes no geometry and no judgement.
+    detail: str = DEFAULT_DETAIL
 
     @property
     def context_config(self) -> ContextConfig:
@@ -61,6 +65,7 @@ class EpisodeConfig:
             raise ConfigError(f"unknown shield {self.shield!r}; valid shields: {', '.join(SHIELD_REGISTRY)}")
         if self.step_deadline_s is not None and not self.step_deadline_s > 0:
             raise ConfigError(f"step_deadline_s must be positive or None, got {self.step_deadline_s!r}")
+        check_detail(self.detail)
         if self.overlay is not None and self.overlay not in OVERLAYS:
             raise ConfigError(f"unknown overlay {self.overlay!r}; valid overlays: {', '.join(OVERLAYS)}")
 

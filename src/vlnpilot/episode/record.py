@@ -133,7 +133,8 @@ class EpisodeRecording:
                        "context": {"preset": context_name(config.context_config), **config.context_config.to_dict()},
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict(),
-                       **({"camera": camera} if (camera := camera_settings_of(env)) else {})},
+                       **({"camera": camera} if (camera := camera_settings_of(env)) else {}),
+                       **({"detail": config.detail} if config.detail != "plain" else {})},  # plain: as before
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
             "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),

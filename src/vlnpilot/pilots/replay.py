@@ -155,15 +155,15 @@ def _recording(source: Path, row: str | None) -> Path | None:
 
 
 def recorded_settings(spec: str | None) -> dict[str, str]:
-    """What a `replay:RUN_DIR` pilot's run was flown with (context, profile, shield), so that `vln-pilot run` flies
-    the replay as it was flown unless an option says otherwise; {} for another pilot or a set of trials."""
+    """What a `replay:RUN_DIR` pilot's run was flown with (context, profile, shield, detail), so that `vln-pilot run`
+    flies the replay as it was flown unless an option says otherwise; {} for another pilot or a set of trials."""
     if not spec or not spec.startswith("replay:"):
         return {}
     run_dir = Path(spec.removeprefix("replay:"))
     if not (run_dir / "summary.json").is_file():
         return {}
     config = load_run(run_dir)[0].get("config", {})
-    settings = {**_flown_with(config), **camera_flown_with(config)}
+    settings = {**_flown_with(config), **camera_flown_with(config), "detail": config.get("detail")}  # what it saw
     return {key: str(value) for key, value in settings.items() if value is not None and value != ""}
 
 

@@ -24,6 +24,7 @@ from vlnpilot.core.ranging import TT_TOF_BEYOND_MM
 from vlnpilot.core.records import Motion, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.emulator_video import VideoStreamer
+from vlnpilot.scene.detail import check_detail
 
 MOVES = {"forward": (1, 0, 0), "back": (-1, 0, 0), "left": (0, 1, 0), "right": (0, -1, 0),
          "up": (0, 0, 1), "down": (0, 0, -1)}
@@ -58,6 +59,7 @@ class EmulatorConfig:
     # its lag is `video_delay_s`, in real time); `randomize`: the seed of a randomised world
     camera: str = "ideal"
     randomize: int | None = None
+    detail: str = "plain"  # the scene detail its camera renders (scene/detail.py): plain | rich
 
     def __post_init__(self) -> None:
         from vlnpilot.sim.camera_model import check_camera
@@ -70,6 +72,7 @@ class EmulatorConfig:
         if not loopback:
             raise ConfigError(f"the Tello emulator listens on loopback only; got host {self.host!r} "
                               "(use 127.0.0.1 or another 127.x.y.z address)")
+        check_detail(self.detail)
         if not 0.0 <= self.drop_replies < 1.0:
             raise ConfigError(f"drop_replies must be within 0..1, got {self.drop_replies}")
 
@@ -105,7 +108,7 @@ class TelloEmulator:
         self.sim = sim = Simulator(scene, SimConfig(render=False, sensors="tof" if self.config.ext_tof else "none"))
         self._camera = (scene, SimConfig(width=width, height=height, rear_camera=False, camera=self.config.camera,
                                          camera_lag_ms=0.0 if self.config.camera == "tello" else None,
-                                         randomize=self.config.randomize))
+                                         randomize=self.config.randomize, detail=self.config.detail))
         self._viewer: Simulator | None = None  # created on the video thread
         spawn_obj = sim.scene.spawn(spawn) if spawn else sim.scene.spawns[0]
         self.home = spawn_obj.pose

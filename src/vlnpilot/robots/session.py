@@ -32,7 +32,7 @@ class Robot:
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
              sensors: str) -> AbstractContextManager[Any]:
         """The environment, released when the block ends, whatever happened. A robot whose frames are simulated
-        also takes `camera` and `randomize` (`--camera`, `--randomize`: docs/camera.md)."""
+        also takes `camera`, `camera_lag_ms`, `randomize` and `detail` (docs/camera.md, docs/scenes.md)."""
         raise NotImplementedError
 
 
@@ -48,11 +48,11 @@ class SimRobot(Robot):
 
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
              sensors: str, camera: str | None = None, camera_lag_ms: float | None = None,
-             randomize: int | None = None) -> AbstractContextManager[Any]:
+             randomize: int | None = None, detail: str = "plain") -> AbstractContextManager[Any]:
         from vlnpilot.sim import SimConfig, Simulator
 
         return Simulator(scene, SimConfig(sensors=sensors, camera=camera or "ideal", camera_lag_ms=camera_lag_ms,
-                                          randomize=randomize))
+                                          randomize=randomize, detail=detail))
 
 
 class TelloRobot(Robot):
@@ -70,7 +70,7 @@ class TelloRobot(Robot):
 
     @contextmanager
     def open(self, scene: Scene, *, tello_host: str | None, event_log: Path | None, operator: Any,
-             sensors: str) -> Iterator[Any]:
+             sensors: str, detail: str = "plain") -> Iterator[Any]:
         from vlnpilot.robots.tello import TelloEnv
         from vlnpilot.robots.tello_config import load_tello_config
 
@@ -154,13 +154,17 @@ def check_camera_for(robot: str, camera: str | None, camera_lag_ms: float | None
 @contextmanager
 def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event_log: Path | None = None,
                operator: Any = None, sensors: str = "none", camera: str | None = None,
-               camera_lag_ms: float | None = None, randomize: int | None = None) -> Iterator[Any]:
+               camera_lag_ms: float | None = None, randomize: int | None = None,
+               detail: str = "plain") -> Iterator[Any]:
     """The environment for `robot`; a Tello is landed and released when the block ends, whatever happened.
-    `camera`, `camera_lag_ms`, `randomize`: how a simulator's frames are made (`check_camera_for` first)."""
+    `camera`, `camera_lag_ms`, `randomize`, `detail`: how a simulator's frames are made (`check_camera_for` first);
+    each reaches `open` only when set, so a robot registered before they existed opens as it did."""
     imaging = {key: value for key, value in (("camera", camera), ("camera_lag_ms", camera_lag_ms),
                                              ("randomize", randomize)) if value is not None}
+    if detail != "plain":
+        imaging["detail"] = detail
     if str(robot).strip().lower() != "sim":
-        imaging = {}  # a real camera (check_camera_for refused what does not apply)
+        imaging = {}  # a real camera (check_camera_for and --detail's check refused what does not apply)
     with get_robot(robot).open(scene, tello_host=tello_host, event_log=event_log, operator=operator,
                                sensors=sensors, **imaging) as env:
         yield env

@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from xml.sax.saxutils import quoteattr
 
+from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, is_detail, with_detail
 from vlnpilot.scene.model import Scene, Solid
 from vlnpilot.scene.textures import png_bytes
 
@@ -27,7 +28,7 @@ def _geom(solid: Solid) -> str:
         "material": solid.material,
         "contype": str(WORLD_CONTYPE if solid.collide else 0),
         "conaffinity": str(WORLD_CONAFFINITY if solid.collide else 0),
-        "group": "0" if solid.collide else "1",
+        "group": "0" if solid.collide else str(DETAIL_GROUP) if is_detail(solid.name) else "1",
     }
     if solid.shape == "cylinder":
         attrs["size"] = _f(solid.size[:2])
@@ -42,8 +43,10 @@ def _geom(solid: Solid) -> str:
 
 
 def scene_to_mjcf(scene: Scene, *, bodies: str = "", assets_xml: str = "", max_render: tuple[int, int] = (960, 720),
-                  shadows: bool = False) -> tuple[str, dict[str, bytes]]:
-    """MJCF for the scene. `bodies` is extra worldbody XML (the drone); returns (xml, assets)."""
+                  shadows: bool = False, detail: str = DEFAULT_DETAIL) -> tuple[str, dict[str, bytes]]:
+    """MJCF for the scene. `bodies` is extra worldbody XML (the drone); returns (xml, assets).
+    `detail` (scene/detail.py): `plain` is the scene as built, `rich` adds visual-only parts."""
+    scene = with_detail(scene, detail)
     textures = sorted({m.texture for m in scene.materials if m.texture})
     assets = {f"{t}.png": png_bytes(t) for t in textures}
     tex_xml = "\n    ".join(f'<texture name="{t}" type="2d" file="{t}.png"/>' for t in textures)

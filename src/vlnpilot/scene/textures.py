@@ -153,6 +153,23 @@ def painting(seed: int = 9) -> np.ndarray:
     return _to_img(img)
 
 
+def art(seed: int) -> np.ndarray:
+    """A framed picture's canvas (rich detail): a seeded abstract of colour fields, bands and discs."""
+    rng = _rng(seed)
+    h = w = SIZE
+    y, x = np.mgrid[0:h, 0:w].astype(np.float32) / h
+    top, bottom = rng.integers(40, 230, 3), rng.integers(30, 200, 3)
+    img = top * (1 - y[..., None]) + bottom * y[..., None]
+    for _ in range(int(rng.integers(2, 5))):
+        if rng.random() < 0.5:  # a band
+            y0 = rng.uniform(0.2, 0.8)
+            img[(y > y0) & (y < y0 + rng.uniform(0.05, 0.2))] = rng.integers(20, 250, 3)
+        else:  # a disc
+            cx, cy, r = rng.uniform(0.2, 0.8), rng.uniform(0.2, 0.8), rng.uniform(0.06, 0.2)
+            img[(x - cx) ** 2 + (y - cy) ** 2 < r * r] = rng.integers(20, 250, 3)
+    return _to_img(img * (0.9 + 0.15 * _smooth_noise(rng, (h, w), 8)[..., None]))
+
+
 TEXTURES: dict[str, Callable[[], np.ndarray]] = {
     "floor_wood": lambda: wood_planks((150, 100, 60)),
     "floor_wood_light": lambda: wood_planks((185, 140, 95), planks=8, seed=11),
@@ -171,6 +188,10 @@ TEXTURES: dict[str, Callable[[], np.ndarray]] = {
     "painted_wood": lambda: wood_planks((220, 215, 200), planks=4, seed=18),
     "mirror_glass": lambda: mirror_glass(),
     "painting": lambda: painting(),
+    # rich detail (scene/detail.py): 8 boards per texture, so that a known texrepeat makes each 14 cm wide
+    "floor_planks": lambda: wood_planks((150, 100, 60), planks=8, seed=21),
+    "floor_planks_light": lambda: wood_planks((185, 140, 95), planks=8, seed=22),
+    **{f"art_{i}": (lambda i=i: art(30 + i)) for i in range(4)},
 }
 
 

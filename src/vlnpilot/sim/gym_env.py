@@ -42,7 +42,8 @@ class CabinEnv(gym.Env):
     overrides it for one episode), `goal_room` (room id or alias; optional, also a reset option), `max_steps`,
     `width`/`height` of the front image, `render_mode="rgb_array"` (`render()` returns the rear chase view),
     `spawn_jitter_m`/`spawn_jitter_deg` (seeded spawn variety), `sensors` (none, tof or multiranger: the
-    observation gains "ranges", metres per beam of `vlnpilot.core.ranging.SENSORS`, -1 beyond the sensor's range).
+    observation gains "ranges", metres per beam of `vlnpilot.core.ranging.SENSORS`, -1 beyond the sensor's range),
+    `detail` (plain or rich: the scene detail the cameras render, docs/scenes.md).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -50,7 +51,7 @@ class CabinEnv(gym.Env):
     def __init__(self, scene: str | Scene = "cabin", *, spawn: str | Spawn | Pose | None = None,
                  goal_room: str | None = None, max_steps: int = 50, width: int = 640, height: int = 480,
                  render_mode: str | None = None, spawn_jitter_m: float = 0.0, spawn_jitter_deg: float = 0.0,
-                 sensors: str = "none", camera: str = "ideal", randomize: int | None = None):
+                 sensors: str = "none", camera: str = "ideal", randomize: int | None = None, detail: str = "plain"):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ConfigError(f"render_mode {render_mode!r} is not one of {self.metadata['render_modes']}")
         if max_steps < 1:
@@ -64,7 +65,7 @@ class CabinEnv(gym.Env):
         self.sim = Simulator(self.scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height,
                                                    rear_camera=render_mode == "rgb_array",
                                                    spawn_jitter_m=spawn_jitter_m, spawn_jitter_deg=spawn_jitter_deg,
-                                                   sensors=sensors, camera=camera, randomize=randomize))
+                                                   sensors=sensors, camera=camera, randomize=randomize, detail=detail))
         self.commands: tuple[Command, ...] = tuple(COMMANDS.values())
 
         (xmin, ymin), (xmax, ymax) = self.scene.bounds

@@ -28,11 +28,11 @@ class HouseEnv(gym.Env):
 
     def __init__(self, house: int = 0, rooms: int | None = None, *, max_steps: int = 150, width: int = 640,
                  height: int = 480, render_mode: str | None = None, sensors: str = "none", camera: str = "ideal",
-                 randomize: int | None = None):
+                 randomize: int | None = None, detail: str = "plain"):
         self._spec = HouseSpec(int(house), rooms)
         self._kwargs: dict[str, Any] = {"max_steps": max_steps, "width": width, "height": height,
                                         "render_mode": render_mode, "sensors": sensors, "camera": camera,
-                                        "randomize": randomize}
+                                        "randomize": randomize, "detail": detail}
         self.render_mode = render_mode
         self._env: CabinEnv | None = None
         self.action_space = spaces.Discrete(len(COMMANDS))

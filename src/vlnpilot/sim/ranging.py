@@ -1,7 +1,8 @@
 """The range sensors (`vlnpilot.core.ranging.SENSORS`) simulated by MuJoCo ray casts from the drone's pose.
 
 Each beam starts at the drone's centre plane, at its skin in the beam's direction (the front beam at the camera's
-lens), and ignores the drone's own geoms; visual-only geoms (pictures, rugs) reflect a beam as they would a laser.
+lens), and ignores the drone's own geoms; visual-only geoms (pictures, rugs) reflect a beam as they would a laser,
+except the rich detail of `--detail rich` (scene/detail.py), which is not in the scene's geometry.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import numpy as np
 
 from vlnpilot.core.ranging import FRONT_BEAM_START_M, RangeReading, RangeSensor
 from vlnpilot.core.records import Pose
+from vlnpilot.scene.detail import DETAIL_GROUP
 from vlnpilot.sim import drone
 
 # Where each beam leaves the drone, in its body frame (x forward, y left, z up): (direction, start offset).
@@ -23,6 +25,8 @@ _BEAMS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]]
     "right": ((0.0, -1.0, 0.0), (0.0, -drone.WIDTH / 2, 0.0)),
     "up": ((0.0, 0.0, 1.0), (0.0, 0.0, drone.HEIGHT / 2)),
 }
+# Every geom group but the rich detail's (visual only, not in the scene's geometry: docs/scenes.md).
+_SENSED_GROUPS = np.array([int(g != DETAIL_GROUP) for g in range(mujoco.mjNGROUP)], np.uint8)
 
 
 def beam_distance(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, direction: str, exclude_body: int,
@@ -39,7 +43,7 @@ def beam(model: mujoco.MjModel, data: mujoco.MjData, pose: Pose, direction: str,
     start = np.array([pose.x + ox * c - oy * s, pose.y + ox * s + oy * c, pose.z + oz])
     heading = np.array([dx * c - dy * s, dx * s + dy * c, dz])
     geom = np.zeros(1, np.int32)
-    hit = mujoco.mj_ray(model, data, start, heading, None, 1, exclude_body, geom)
+    hit = mujoco.mj_ray(model, data, start, heading, _SENSED_GROUPS, 1, exclude_body, geom)
     return (float(hit), int(geom[0])) if 0 <= hit <= max_m else (None, -1)
 
 

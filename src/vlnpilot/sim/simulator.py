@@ -22,6 +22,7 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
 from vlnpilot.core.ranging import RangeReading, range_sensor  # noqa: E402
 from vlnpilot.core.records import Footprint, Motion, Observation, Pose, wrap_deg  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
+from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, check_detail  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import drone  # noqa: E402
 from vlnpilot.sim.camera_model import (  # noqa: E402
@@ -32,6 +33,7 @@ from vlnpilot.sim.camera_model import (  # noqa: E402
     lagged_fraction,
     make_camera,
 )
+from vlnpilot.sim.mirrors import mirror_geoms, reflect_in_view  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
@@ -60,9 +62,11 @@ class SimConfig:
     camera: str = "ideal"  # what the front camera delivers (sim.camera_model.CAMERAS): ideal | tello
     camera_lag_ms: float | None = None  # the tello camera's frame lag (None: its default, docs/camera.md)
     randomize: int | None = None  # domain randomisation seed (sim/randomize.py); None: the scene as built
+    detail: str = DEFAULT_DETAIL  # scene detail the RGB cameras see (scene/detail.py): plain | rich
 
     def __post_init__(self) -> None:
         range_sensor(self.sensors)  # a bad name is refused here, in one line
+        check_detail(self.detail)
         object.__setattr__(self, "camera", check_camera(self.camera))
         if self.camera_lag_ms is not None and self.camera != "tello":
             raise ConfigError("a camera lag applies to --camera tello only")
@@ -124,12 +128,15 @@ class Simulator:
         self.scene: Scene = load_scene(scene)
         self.config = config or SimConfig()
         xml, assets = scene_to_mjcf(self.scene, bodies=drone.drone_body_xml(), assets_xml=drone.drone_assets_xml(),
-                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows)
+                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows, detail=self.config.detail)
+        self._rgb_option = mujoco.MjvOption()  # the RGB cameras alone show the detail group
+        self._rgb_option.geomgroup[DETAIL_GROUP] = 1
         self.range_sensor = range_sensor(self.config.sensors)
         if self.range_sensor is not None:  # this drone carries range sensors: it says so
             self.capabilities = replace(Simulator.capabilities, range_sensor=self.range_sensor.name)
         self.model = mujoco.MjModel.from_xml_string(xml, assets)
         self.data = mujoco.MjData(self.model)
+        self._mirrors = mirror_geoms(self.model)  # a frame reflects the nearest in view, if any (sim/mirrors.py)
         m = self.model
         self._qpos_adr = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, drone.JOINT)]
         body_id = self._body_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, drone.BODY)
@@ -429,7 +436,10 @@ class Simulator:
         if depth:
             r.enable_depth_rendering()
         try:
-            r.update_scene(self.data, camera=camera)
+            r.update_scene(self.data, camera=camera, scene_option=None if depth else self._rgb_option)
+            if self._mirrors and not depth:
+                reflect_in_view(r.scene, self._mirrors, w / h, (self.model, self.data, self._body_id),
+                                keep=front)  # the chase view: no reflection pass
             return r.render().copy()
         finally:
             if depth:
