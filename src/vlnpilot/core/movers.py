@@ -77,3 +77,8 @@ class FiredEvent:
     def as_dict(self) -> dict[str, object]:
         return {"name": self.name, "kind": self.kind, "step": self.step, "time_s": round(self.time_s, 3),
                 "trigger": self.trigger, "params": self.params}
+
+
+# The mover shield (safety/movers.py) keeps the drone's bounding circle this far (m, horizontally) from the
+# footprint of each kind of mover, at its predicted position over every command; the prompts state the same numbers.
+SHIELD_MARGIN_M = {"person": 0.5, "pet": 0.4}
