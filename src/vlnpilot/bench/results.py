@@ -208,6 +208,10 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         isr: float
         csr: float
         cgt: float
+        mover_collisions: int
+        mover_episodes: int
+        signs_obeyed: int
+        sign_episodes: int
 else:
     PilotSummary = summary_type()
 
