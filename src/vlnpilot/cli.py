@@ -136,6 +136,9 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
         live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
         planner: PlannerOpt = "auto",
+        events: Annotated[str | None, typer.Option("--events", help="A scenario of events (people, pets, doors "
+                                                   "that close, lights out, signs): a YAML file or a built-in "
+                                                   "name (docs/events.md). The simulator only.")] = None,
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
@@ -152,7 +155,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.pilots.replay import recorded_settings
+    from vlnpilot.pilots.replay import recorded_scenario, recorded_settings
     from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
@@ -166,7 +169,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
-    sc = load_scene(scene)
+    sc = _with_events(load_scene(scene), events, recorded_scenario(pilot), robot)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
     profile = profile or recorded.get("profile") or default_profile(forward_range(sensors))
@@ -212,6 +215,19 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
     console.print(f"run directory: {escape(str(run_dir))}  (report: {_optional_report(run_dir, video=video)})")
     raise typer.Exit(exit_code_for([result.outcome]))
+
+
+def _with_events(sc: Scene, events: str | None, recorded: dict | None, robot: str) -> Scene:
+    """The scene with `--events` (or, for a replay without it, the recording's scenario): the simulator only."""
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.scene.events import load_scenario, scenario_from_dict, with_scenario
+
+    if events is None and recorded is None:
+        return sc
+    if robot != "sim":
+        raise ConfigError(f"--events needs the simulator (--robot sim); the {robot} flies in a real room")
+    scenario = load_scenario(events) if events is not None else scenario_from_dict(recorded, "of the recording")
+    return with_scenario(sc, scenario)
 
 
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):

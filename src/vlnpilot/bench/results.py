@@ -208,6 +208,8 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         isr: float
         csr: float
         cgt: float
+        unreachable: int
+        unreachable_reported: int
         mover_collisions: int
         mover_episodes: int
         signs_obeyed: int

@@ -15,7 +15,7 @@ import numpy as np
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.core.movers import MoverSensing
+from vlnpilot.core.movers import MoverSensing, MoverState
 from vlnpilot.core.ranging import SENSORS, RangeReading, range_sensor
 from vlnpilot.core.records import Footprint, MotionSampling, Observation, Pose
 
@@ -49,6 +49,9 @@ class GroundTruth(MotionSampling, Protocol):
     def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
         """(distance, scene part, drone part) of the nearest geometry within `max_distance` of the drone at
         `pose` (negative when penetrating), else None."""
+
+    def movers(self) -> tuple[MoverState, ...]:
+        """The people and pets in the scene now (issue 24; () where nothing moves)."""
 
 
 @dataclass(frozen=True)

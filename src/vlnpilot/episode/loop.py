@@ -127,7 +127,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
     end = end or _End("max_steps", progress.prefix(False, f"no final state within {max_steps} steps"))
     stages_reached = len(progress.boundaries) + (end.outcome == "success")
     measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries),
-                                          end.contact))
+                                          final_state=state.value, contact=end.contact))
     result = _result(end, steps, state, gt, measured, t_start)
     recording.finish(result, obs.pose, safety)
     _tell_pilot_the_outcome(pilot, result)
@@ -243,14 +243,15 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
 def _judged(progress: MissionProgress, state: State, gt: GroundTruth | None, config: EpisodeConfig,
             judge_outcome: JudgeOutcome | None) -> _End:
     """A declared final state: the current stage judged by ground truth, by the operator, or taken as declared."""
+    right = "unreachable" if state is State.GOAL_UNREACHABLE else "success"  # a true report is its own kind
     if gt is None and judge_outcome is not None:
         ok, reason = judge_outcome(progress.task, state)
-        return _End("success" if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
+        return _End(right if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
     if gt is None:
-        return _End("success", progress.prefix(True, "final state declared (no ground truth to judge it)"),
+        return _End(right, progress.prefix(True, "final state declared (no ground truth to judge it)"),
                     judged_by="declared")
     ok, why = progress.judge(state, gt, config.success)
-    return _End("success" if ok else "false_success", progress.prefix(ok, why))
+    return _End(right if ok else "false_success", progress.prefix(ok, why))
 
 
 def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measured: dict[str, Any],

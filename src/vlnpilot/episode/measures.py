@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import Decision, Usage
-from vlnpilot.core.fsm import FINAL_STATES
+from vlnpilot.core.fsm import FINAL_STATES, State
 from vlnpilot.core.movers import FiredEvent, is_mover_contact
 from vlnpilot.core.records import Pose
 from vlnpilot.safety import SafetyLayer
@@ -188,6 +188,7 @@ class EpisodeEnd:
     safety: SafetyLayer
     stages_reached: int | None = None  # stages judged a success in a row (None: counted from the outcome)
     stage_boundaries: tuple[int, ...] = ()  # the step at which each stage before the last was judged a success
+    final_state: str | None = None  # the FSM state the episode ended in
     contact: str | None = None  # what the drone touched, if the episode ended in a collision
 
 
@@ -414,6 +415,27 @@ class MissionStages:
                 "stage_paths_m": [round(p, 4) for p in self.paths]}
 
 
+def _when_reported(s: Any) -> bool:
+    return s.unreachable_reported > 0  # a bench in which some pilot reported a goal unreachable
+
+
+class Unreachable(_ReadAtTheEnd):
+    """Issue 24: a goal the pilot reported unreachable (the Goal Unreachable state), and whether the report was
+    true (outcome `unreachable`, a success of its own kind; a false report is a false_success). The column reads
+    "true/reported"."""
+
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("unreachable", int, 0),
+                                                 ResultField("unreachable_reported", int, 0))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("unreachable", absent=0),
+                                                   Total("unreachable_reported", absent=0))
+    columns: ClassVar[tuple[Column, ...]] = (
+        Column(35, "Unreachable (true/reported)", "Unreach.", ("unreachable", "unreachable_reported"),
+               lambda s: f"{s.unreachable}/{s.unreachable_reported}",
+               lambda s: (s.unreachable, s.unreachable_reported), when=_when_reported),)
+
+    def value(self, end: EpisodeEnd) -> dict[str, Any]:
+        return {"unreachable": int(end.outcome == "unreachable"),
+                "unreachable_reported": int(end.final_state == State.GOAL_UNREACHABLE.value)}
 def _when_movers(s: Any) -> bool:
     return s.mover_episodes > 0
 
@@ -508,6 +530,7 @@ MEASURES: tuple[type[Measure] | FilledByTheEpisode, ...] = (
     # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
     FilledByTheEpisode(ResultField("judged_by", str, "ground_truth")),
     MissionStages,
+    Unreachable,
     MoverCollisions, SignsObeyed,
 )
 
@@ -592,6 +615,8 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         failed_stage: int | None = None
         stage_starts: list | None = None
         stage_paths_m: list | None = None
+        unreachable: int = 0
+        unreachable_reported: int = 0
         mover_collisions: int | None = None
         signs_obeyed: int | None = None
         sign_seen_step: int | None = None

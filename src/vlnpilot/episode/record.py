@@ -137,6 +137,9 @@ class EpisodeRecording:
                        "seed": config.seed, "success": asdict(config.success), "shield": safety.name,
                        "overlay": config.overlay, "safety": config.safety.to_dict()},
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
+            # issue 24: the scenario of events (replayed with it) and those that fired at take-off
+            **({"scenario": scene.scenario.to_dict()} if scene.scenario is not None else {}),
+            **({"events": [e.as_dict() for e in obs.events]} if obs.events else {}),
             "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
                            "scene_fingerprint": scene.fingerprint(),

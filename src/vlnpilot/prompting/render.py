@@ -45,7 +45,7 @@ __all__ = [
 
 
 
-UNREACHABLE_STATE = "Goal Unreachable"  # placeholder until the FSM names it (branch events)
+UNREACHABLE_STATE = State.GOAL_UNREACHABLE.value  # the FSM's addition (issue 24) the events rules name
 
 # The step text's section on the current state (`PilotInput.in_state`); the state prompts' rules refer to it by name.
 IN_STATE_HEADING = "Flown in this state"

@@ -4,8 +4,8 @@ A `Scenario` is a scene name, a seed and its `EventSpec`s. Each event fires on a
 on the episode's clock, or when the drone enters a room. The kinds:
 
 * `person` / `pet`: a mover that walks a `path` of rooms, doors or [x, y] points (consecutive rooms are joined
-  through the door between them); a person may stop in a doorway (`pause_in_doorway_s`). It stands at the start
-  of its path until its trigger fires.
+  through the door between them); a person may stop in a doorway (`pause_in_doorway_s`). It enters the scene at
+  the start of its path when its trigger fires, and stands at the end of it (or walks it back and forth: `repeat`).
 * `door_closes`: an open doorway's leaf swings shut; the doorway leaves the TRUE topological map (the pilot's map
   in the prompt stays as it was).
 * `lights_out`: a room's lights dim to a named level (`dim`, `dark`, or a number in 0..1 with a `name`).
@@ -69,11 +69,11 @@ KIND_FIELDS = {
     "pet": {"path", "speed_mps", "repeat"},
     "door_closes": {"door", "swing_s"},
     "lights_out": {"room", "level"},
-    "sign": {"room", "text", "wall", "along", "height_m", "screen", "redirect"},
+    "sign": {"room", "text", "wall", "along", "at", "facing_deg", "width_m", "height_m", "screen", "redirect"},
 }
 # The fields each kind needs, and those it takes.
 REQUIRED = {"person": ("path",), "pet": ("path",), "door_closes": ("door",), "lights_out": ("room", "level"),
-            "sign": ("room", "text", "wall")}
+            "sign": ("room", "text")}
 
 
 class EventSpec(BaseModel):
@@ -91,7 +91,7 @@ class EventSpec(BaseModel):
     repeat: bool = False  # walk the path back and forth instead of stopping at its end
     # door_closes
     door: str | None = None
-    swing_s: float = Field(1.0, gt=0, le=10)
+    swing_s: float = Field(2.0, gt=0, le=10)
     # lights_out, sign
     room: str | None = None
     level: float | str | None = None
@@ -99,6 +99,9 @@ class EventSpec(BaseModel):
     text: str | None = Field(None, min_length=1, max_length=160)
     wall: Literal["north", "south", "east", "west"] | None = None
     along: float = Field(0.5, ge=0, le=1)  # where along the wall (0: its west or south end)
+    at: tuple[float, float] | None = None  # or a free-standing sign on a stand at (x, y) ...
+    facing_deg: float = 0.0  # ... its face looking this way (degrees counter-clockwise from +x)
+    width_m: float = Field(1.0, ge=0.3, le=1.6)  # the board's width; its height is 0.6 of it
     height_m: float = Field(1.1, gt=0.2, le=2.4)  # of the sign's centre above the floor
     screen: bool = False  # a lit screen instead of a printed sign
     redirect: bool = False  # the text tries to steer the pilot
@@ -114,6 +117,8 @@ class EventSpec(BaseModel):
             raise ValueError(f"{self.kind} needs {', '.join(missing)}")
         if self.kind == "lights_out":
             self.light_level()  # a bad level is refused here
+        if self.kind == "sign" and (self.wall is None) == (self.at is None):
+            raise ValueError("a sign needs exactly one of wall (on a wall of its room) or at (free-standing)")
         return self
 
     def light_level(self) -> tuple[float, str]:
@@ -179,7 +184,9 @@ class Scenario(BaseModel):
         return tuple(e for e in self.events if e.is_mover)
 
     def to_dict(self) -> dict[str, Any]:
-        return self.model_dump(mode="json", exclude_defaults=False)
+        """As recorded in a run's header (what `scenario_from_dict` reads back): the fields that were set."""
+        return {"name": self.name, "scene": self.scene, "seed": self.seed,
+                **self.model_dump(mode="json", exclude_defaults=True, include={"description", "events"})}
 
 
 def _one_line(exc: ValidationError, source: str) -> ConfigError:
@@ -275,5 +282,7 @@ def validate_scenario(scenario: Scenario, scene: Scene) -> None:
             fail(e, f"unknown open door {e.door!r}; valid: {', '.join(sorted(doors))}")
         elif e.kind in ("lights_out", "sign"):
             check_room(e, e.room)
+            if e.at is not None and scene.room_at(*e.at) != e.room:
+                fail(e, f"at {list(e.at)} is not in the room {e.room}")
     if scenario.scene != scene.name and not scene.name.startswith(scenario.scene):
         raise ConfigError(f"scenario {scenario.name} is for scene {scenario.scene!r}, not {scene.name!r}")
