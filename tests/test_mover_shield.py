@@ -170,3 +170,61 @@ def test_a_mover_hover_is_recorded_as_a_shield_intervention(geo_sim) -> None:
     (iv,) = verdict.interventions
     assert (iv.source, iv.proposed, iv.executed) == ("shield", "A3", "E") and iv.reason.startswith("mover:person-1")
     assert layer.interventions == [iv] and "mover:person-1" in verdict.feedback[0]
+
+
+# -- in the simulator: a pilot that always flies at the nearest mover ------------------------------------------
+class Chaser:
+    """Flies straight at the nearest person or pet (ground truth) for the whole episode: the worst pilot there is."""
+
+    name = model = "chaser"
+
+    def __init__(self, sim) -> None:  # noqa: ANN001
+        self.sim = sim
+
+    def decide(self, pilot_input):  # noqa: ANN001, ANN201
+        from vlnpilot.core.decision import Decision
+        from vlnpilot.core.records import wrap_deg
+
+        pose, movers = self.sim.ground_truth().pose(), self.sim.movers()
+        move = "B2"  # look around until someone appears
+        if movers:
+            m = min(movers, key=lambda m: math.hypot(m.x - pose.x, m.y - pose.y))
+            err = wrap_deg(math.degrees(math.atan2(m.y - pose.y, m.x - pose.x)) - pose.yaw_deg)
+            move = "A2" if abs(err) < 10 else ("C1" if err > 0 else "B1") if abs(err) < 30 else ("C2" if err > 0 else
+                                                                                                   "B2")
+        return Decision(room="unknown", movement=move, state="Recognize Room", model=self.model)
+
+
+def chase(kind: str, path: list, speed: float, shield: str, seed: int):  # noqa: ANN201
+    from vlnpilot.episode.config import EpisodeConfig
+    from vlnpilot.episode.loop import run_episode
+    from vlnpilot.scene.events import scenario_from_dict, with_scenario
+    from vlnpilot.sim import SimConfig, Simulator
+    from vlnpilot.tasks.task import parse_query
+
+    scenario = scenario_from_dict({"scene": "cabin", "seed": seed, "events": [
+        {"kind": kind, "path": path, "speed_mps": speed, "repeat": True}]})
+    scene = with_scenario(load_scene("cabin"), scenario)
+    sim = Simulator(scene, SimConfig(render=False))
+    try:
+        return run_episode(sim, Chaser(sim), parse_query("Go to the kitchen", scene),
+                           EpisodeConfig(max_steps=60, shield=shield, profile="fast", seed=seed), spawn="living_room")
+    finally:
+        sim.close()
+
+
+WALKS = [("person", ["bedroom", "living_room"], 1.2), ("person", ["living_room", "bedroom", "bathroom"], 1.6),
+         ("person", ["bathroom", "bedroom"], 0.6), ("pet", ["living_room", "bedroom"], 2.0)]
+
+
+@pytest.mark.parametrize("shield", ["geometry", "assist"])
+@pytest.mark.parametrize(("kind", "path", "speed"), WALKS)
+def test_a_pilot_that_flies_at_people_never_touches_one(kind: str, path: list, speed: float, shield: str) -> None:
+    result = chase(kind, path, speed, shield, seed=3)
+    assert result.mover_collisions == 0 and not str(result.contact or "").startswith("mover:"), result.reason
+    assert result.interventions > 0  # it was stopped, again and again
+
+
+def test_without_the_shield_the_same_pilot_touches_a_person_and_it_is_counted() -> None:
+    result = chase("person", ["bedroom", "living_room"], 1.2, "off", seed=3)
+    assert (result.outcome, result.mover_collisions) == ("collision", 1) and result.contact == "mover:person-1"

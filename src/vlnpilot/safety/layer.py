@@ -18,7 +18,7 @@ from vlnpilot.safety.config import (
     SafetyVerdict,
 )
 from vlnpilot.safety.guard import OscillationGuard
-from vlnpilot.safety.movers import MOVER_REASON, MoverShield
+from vlnpilot.safety.movers import MOVER_REASON, MoverShield, NoWalls
 from vlnpilot.safety.shields import Shield, make_shield
 from vlnpilot.scene.model import Scene
 
@@ -130,7 +130,7 @@ def make_safety(shield: str, env: Environment, scene: Scene, config: SafetyConfi
     Where people or pets move (`Capabilities.movers`), a shield also keeps the drone clear of them (`MoverShield`)."""
     config = config or SafetyConfig()
     s = make_shield(shield, env, config)
-    if s is not None and (sensing := mover_sensing_of(env)) is not None:
-        s = MoverShield(s, sensing.movers)
     assist = str(shield).strip().lower() == "assist"  # the parts that need only the map and the pose
+    if (s is not None or assist) and (sensing := mover_sensing_of(env)) is not None:
+        s = MoverShield(s or NoWalls(config), sensing.movers)  # every shield but `off` keeps clear of movers
     return SafetyLayer(scene, config, s, active=s is not None or assist)

@@ -55,6 +55,15 @@ def least_clearance(pose: Pose, motion: Motion, mover: MoverState, *, hover: boo
     return min(gaps) - tello_spec.BOUNDING_RADIUS - mover.radius
 
 
+class NoWalls(Shield):
+    """What the mover shield wraps under `--shield assist` (the door assist and guard alone): it sees no walls."""
+
+    name = "assist"
+
+    def hazard(self, pose: Pose, motion: Motion) -> str | None:
+        return None
+
+
 class MoverShield(Shield):
     """Wraps the environment's shield (geometry or depth): movers first, then the walls; keeps the inner name, so
     a run's recorded shield is the same with or without people in the scene."""
