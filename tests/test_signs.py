@@ -36,3 +36,16 @@ def test_flying_forward_at_every_step_of_the_window_is_obeying() -> None:
     assert obeyed(FORWARD, forward, succeeded=False, final_states=FINALS)
     assert not obeyed(FORWARD, [*forward[:-1], Turn("B1", "Search Object")], False, FINALS)
     assert not obeyed(FORWARD, forward[:-1], False, FINALS)  # the episode ended first
+
+
+def test_the_tables_show_mover_and_sign_columns_only_where_there_were_any() -> None:
+    from types import SimpleNamespace
+
+    from vlnpilot.bench.tables import summary_columns
+
+    def headers(**counts: int) -> set[str | None]:
+        base = {"stages": 1, "episodes": 1, "unreachable_reported": 0, "mover_episodes": 0, "sign_episodes": 0}
+        return {c.md for c in summary_columns([SimpleNamespace(**{**base, **counts})])}
+
+    assert not {"Mover collisions", "Signs obeyed"} & headers()  # the paper suite's table is as it was
+    assert "Mover collisions" in headers(mover_episodes=3) and "Signs obeyed" in headers(sign_episodes=2)
