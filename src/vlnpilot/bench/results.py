@@ -208,6 +208,8 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         isr: float
         csr: float
         cgt: float
+        unreachable: int
+        unreachable_reported: int
 else:
     PilotSummary = summary_type()
 
