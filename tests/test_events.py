@@ -353,3 +353,30 @@ def test_still_scenes_record_as_before() -> None:
     obs = sim.reset("living_room")
     assert "movers" not in capabilities_of(sim).to_dict() and obs.events == () and obs.movers == ()
     assert replace(sim.step("A1"), front_rgb=None).movers == ()
+
+
+# -- suites ------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("name", ["events", "events-houses"])
+def test_the_event_suites_have_every_kind_on_one_and_two_door_routes(name: str) -> None:
+    from vlnpilot.bench.suite import load_suite
+
+    suite = load_suite(name)
+    assert len(suite.rows) * suite.repetitions >= 30
+    covered = set()
+    for row in suite.rows:
+        scene = load_scene(row.scene or suite.scene)
+        doors = len(scene.room_path(scene.spawn(row.spawn).room, row.goal_room)) - 1
+        covered |= {(e["kind"], min(doors, 2)) for e in row.events["events"]}
+        assert row.events_named  # each row names its events
+    kinds = ("person", "pet", "door_closes", "lights_out", "sign")
+    assert {(k, d) for k in kinds for d in (1, 2)} <= covered
+
+
+def test_a_suite_row_with_a_bad_event_is_refused_naming_the_row(tmp_path: Path) -> None:
+    from vlnpilot.bench.suite import SuiteError, load_suite
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("scene: cabin\nrows:\n  - {id: r1, spawn: living_room, query: Go to the bedroom,\n"
+                   "     events: {seed: 1, events: [{kind: door_closes, door: nowhere}]}}\n")
+    with pytest.raises(SuiteError, match=r"row 1 \(r1\).*unknown open door 'nowhere'"):
+        load_suite(bad)

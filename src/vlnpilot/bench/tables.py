@@ -32,7 +32,8 @@ def _dash(n: int) -> str:
 
 
 def _ach(c: CellStats) -> str:
-    return f"{c.successes}/{c.episodes}"
+    """Successes of the cell's episodes; goals rightly reported unreachable are named apart (issue 24)."""
+    return f"{c.successes}/{c.episodes}" + (f" (+{c.unreachable} unreachable)" if c.unreachable else "")
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:
