@@ -380,3 +380,13 @@ def test_a_suite_row_with_a_bad_event_is_refused_naming_the_row(tmp_path: Path) 
                    "     events: {seed: 1, events: [{kind: door_closes, door: nowhere}]}}\n")
     with pytest.raises(SuiteError, match=r"row 1 \(r1\).*unknown open door 'nowhere'"):
         load_suite(bad)
+
+
+def test_a_mission_stage_reported_unreachable_ends_the_mission_unreachable() -> None:
+    from vlnpilot.tasks.mission_parser import plan_mission
+
+    sim = Simulator(with_scenario(CABIN, load_scenario("cabin-door")), SimConfig(render=False, rear_camera=False))
+    mission = plan_mission("Go to the bedroom, then go to the bathroom", sim.scene, "living_room")
+    result = run_episode(sim, OraclePilot(), mission, EpisodeConfig(max_steps=60, seed=1), spawn="living_room")
+    assert result.outcome == "unreachable" and result.stages_reached == 1 and result.failed_stage == 2
+    assert "stage 2/2" in result.reason
