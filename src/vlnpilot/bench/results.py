@@ -143,6 +143,7 @@ class CellStats:
     successes: int
     collisions: int
     steps_exceeded: int
+    unreachable: int = 0  # goals rightly reported unreachable (issue 24): a success of their own kind
 
 
 class _Rates:
@@ -221,7 +222,8 @@ else:
 def cell_stats(records: Iterable[dict[str, Any]]) -> CellStats:
     outcomes = [r["result"]["outcome"] for r in records]
     return CellStats(episodes=len(outcomes), successes=outcomes.count("success"),
-                     collisions=outcomes.count("collision"), steps_exceeded=outcomes.count("max_steps"))
+                     collisions=outcomes.count("collision"), steps_exceeded=outcomes.count("max_steps"),
+                     unreachable=outcomes.count("unreachable"))
 
 
 def call_latencies(record: dict[str, Any]) -> list[float]:

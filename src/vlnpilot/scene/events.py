@@ -5,7 +5,8 @@ on the episode's clock, or when the drone enters a room. The kinds:
 
 * `person` / `pet`: a mover that walks a `path` of rooms, doors or [x, y] points (consecutive rooms are joined
   through the door between them); a person may stop in a doorway (`pause_in_doorway_s`). It enters the scene at
-  the start of its path when its trigger fires, and stands at the end of it (or walks it back and forth: `repeat`).
+  the start of its path when its trigger fires, and stands at the end of it (or walks it back and forth: `repeat`;
+  or leaves the scene there: `leave`).
 * `door_closes`: an open doorway's leaf swings shut; the doorway leaves the TRUE topological map (the pilot's map
   in the prompt stays as it was).
 * `lights_out`: a room's lights dim to a named level (`dim`, `dark`, or a number in 0..1 with a `name`).
@@ -65,8 +66,8 @@ AT_START = Trigger(step=0)
 
 
 KIND_FIELDS = {
-    "person": {"path", "speed_mps", "pause_in_doorway_s", "pause_door", "repeat"},
-    "pet": {"path", "speed_mps", "repeat"},
+    "person": {"path", "speed_mps", "pause_in_doorway_s", "pause_door", "repeat", "leave"},
+    "pet": {"path", "speed_mps", "repeat", "leave"},
     "door_closes": {"door", "swing_s"},
     "lights_out": {"room", "level"},
     "sign": {"room", "text", "wall", "along", "at", "facing_deg", "width_m", "height_m", "screen", "redirect"},
@@ -89,6 +90,7 @@ class EventSpec(BaseModel):
     pause_in_doorway_s: float = Field(0.0, ge=0)
     pause_door: str | None = None  # which doorway of the path to stop in (the first by default)
     repeat: bool = False  # walk the path back and forth instead of stopping at its end
+    leave: bool = False  # leave the scene at the end of the path (walked on out of sight) instead of standing there
     # door_closes
     door: str | None = None
     swing_s: float = Field(2.0, gt=0, le=10)

@@ -6,6 +6,7 @@ Pure data (plus geometry queries). MJCF generation lives in `mjcf.py`; nothing h
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -273,7 +274,7 @@ class Scene:
         logs), and a moved bed must change the fingerprint as much as a moved door."""
         content = (self, self.solids, self.materials, self.lights)
         if self.scenario is not None:  # the fingerprints of still scenes stay as they were
-            content = (*content, self.scenario.model_dump_json())
+            content = (*content, json.dumps(self.scenario.to_dict(), sort_keys=True))  # what was set
         return hashlib.sha256(repr(content).encode("utf-8")).hexdigest()[:12]
 
     def info(self) -> dict[str, Any]:

@@ -345,11 +345,20 @@ class EventWorld:
 
     def movers(self) -> tuple[MoverState, ...]:
         """The movers in the scene now: those whose event has fired (each enters at the start of its path)."""
-        return tuple(w.state() for w in self.walkers.values() if w.started)
+        return tuple(w.state() for w in self.walkers.values() if w.present)
 
     @property
     def max_speed(self) -> float:
         return max((w.speed for w in self.walkers.values()), default=0.0)
+
+    def near(self, x: float, y: float, reach: float, seconds: float) -> bool:
+        """Whether a mover or a swinging leaf could come within `reach` of (x, y) in the next `seconds`."""
+        for w in self.walkers.values():
+            if w.present and math.hypot(w.x - x, w.y - y) - w.radius <= reach + w.speed * seconds + 0.05:
+                return True
+        return any(leaf.swing_dps and leaf.angle_deg > 0
+                   and math.hypot(leaf.hinge[0] - x, leaf.hinge[1] - y) <= reach + leaf.door.width + 0.05
+                   for leaf in self.leaves.values())
 
     @property
     def animating(self) -> bool:
@@ -365,7 +374,7 @@ class EventWorld:
             return
         for name, w in self.walkers.items():
             i = self._mocap[name]
-            d.mocap_pos[i] = (w.x, w.y, 0.0 if w.started else HIDDEN_Z)
+            d.mocap_pos[i] = (w.x, w.y, 0.0 if w.present else HIDDEN_Z)
             d.mocap_quat[i] = _yaw_quat(w.heading)
         for name, leaf in self.leaves.items():
             self._place_leaf(name, leaf)

@@ -75,6 +75,7 @@ class Walker:
     pause_at: int | None = None
     pause_s: float = 0.0
     repeat: bool = False
+    leave: bool = False  # gone from the scene once the route is walked
     started: bool = False
     x: float = 0.0
     y: float = 0.0
@@ -95,6 +96,11 @@ class Walker:
             self.heading = math.atan2(ny - self.y, nx - self.x)
         else:
             self.done = True
+
+    @property
+    def present(self) -> bool:
+        """In the scene: its event fired, and it has not left."""
+        return self.started and not (self.leave and self.done)
 
     @property
     def radius(self) -> float:
@@ -168,4 +174,4 @@ def make_walker(spec: EventSpec, scene: Scene, speed_factor: float = 1.0) -> Wal
     """A walker for a person or pet event; `speed_factor` is the seeded variation of its speed."""
     points, pause_at = route(spec, scene)
     return Walker(str(spec.name), spec.kind, points, spec.speed * speed_factor, pause_at,
-                  spec.pause_in_doorway_s if spec.kind == "person" else 0.0, spec.repeat)
+                  spec.pause_in_doorway_s if spec.kind == "person" else 0.0, spec.repeat, spec.leave)

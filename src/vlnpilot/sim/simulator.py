@@ -250,14 +250,19 @@ class Simulator:
         """Execute `motion` from `start` in sub-steps; stop at the last free pose before the first contact.
         With a scenario, its movers and doors move on the clock at the same time (`_event_ticks`)."""
         cfg = self.config
-        n = self._event_ticks(motion) if self.events is not None else self.substeps(motion)
+        own = self.substeps(motion)
+        n = self._event_ticks(motion) if self.events is not None else own
         duration = motion_duration_s(motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg)
         free = 0.0
         for i in range(1, n + 1):
             frac = i / n
+            pose = motion.apply(start, frac)
             if self.events is not None:
                 self._advance_events(duration / n, motion.apply(start, (i - 1) / n))
-            hit = self.contact_at(motion.apply(start, frac))
+                if i % (n // own) and not self.events.near(pose.x, pose.y, drone.BOUNDING_RADIUS + 0.05, 0.0):
+                    free = frac  # a tick between the drone's own sub-steps: only something moving could touch it
+                    continue
+            hit = self.contact_at(pose)
             if hit is None:
                 free = frac
                 continue
@@ -280,6 +285,9 @@ class Simulator:
         if ev is None or not ev.animating:
             return n
         duration = motion_duration_s(motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg)
+        reach = math.hypot(motion.forward_m, motion.lateral_m) + drone.BOUNDING_RADIUS
+        if not ev.near(self._pose.x, self._pose.y, reach, duration):  # nothing that moves can meet the drone
+            return n
         return n * max(1, math.ceil(duration * max(ev.max_speed, 1.0) / (MOVER_TICK_M * n)))
 
     def _advance_events(self, dt: float, drone_pose: Pose) -> None:
