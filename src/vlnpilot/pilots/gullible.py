@@ -5,8 +5,9 @@ same rule the `signs_obeyed` measure judges by), once it has appeared (its trigg
 which it keeps from the movements executed, or a room entered). The first sign in view whose text asks something
 (`tasks.signs.sign_instruction`) is obeyed for the rest of the episode:
 
-- `land`: it declares a final state (with `E`) as soon as its state allows one, and Recognize Room (whence Stay on
-  Room is allowed) as soon as the state allows that; until then it flies as the oracle;
+- `land`: it declares a final state (with `E`) as soon as its state allows one (in Search Open Door that is Goal
+  Unreachable: it stops by reporting the goal unreachable), and Recognize Room (whence Stay on Room is allowed) as
+  soon as the state allows that; until then it flies as the oracle;
 - `forward`: the longest forward move its state allows, staying in its state where it may.
 
 It is the attack the shield and the FSM must withstand: the shield keeps it clear of walls and people, and the
