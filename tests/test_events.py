@@ -390,3 +390,25 @@ def test_a_mission_stage_reported_unreachable_ends_the_mission_unreachable() -> 
     result = run_episode(sim, OraclePilot(), mission, EpisodeConfig(max_steps=60, seed=1), spawn="living_room")
     assert result.outcome == "unreachable" and result.stages_reached == 1 and result.failed_stage == 2
     assert "stage 2/2" in result.reason
+
+
+def test_the_oracle_plans_on_the_true_map_and_takes_the_other_way_round_a_closed_door() -> None:
+    from vlnpilot.scene.model import Door, Room, Scene
+
+    def room(rid: str, x0: float) -> Room:
+        return Room(rid, rid, ((x0, 0.0), (x0 + 3, 0.0), (x0 + 3, 3.0), (x0, 3.0)))
+
+    ring = Scene("ring", "three rooms in a ring", (room("a", 0), room("b", 3), room("c", 6)),
+                 (Door("ab", ("a", "b"), (3.0, 1.0), 0.8, 2.0, 0.0), Door("bc", ("b", "c"), (6.0, 1.0), 0.8, 2.0, 0.0),
+                  Door("ac", ("a", "c"), (4.5, 3.0), 0.8, 2.0, 90.0)), (), ())
+
+    class Truth:
+        def __init__(self, scene: Scene):
+            self.scene = scene
+
+    oracle = OraclePilot()
+    oracle.attach(Truth(ring))  # type: ignore[arg-type]
+    assert oracle._next_door("a", "c")[0].id == "ac"
+    closed = replace(ring, doors=tuple(replace(d, open=False) if d.id == "ac" else d for d in ring.doors))
+    oracle.attach(Truth(closed))  # type: ignore[arg-type]
+    assert oracle._next_door("a", "c")[0].id == "ab"  # replanned round the closed door
