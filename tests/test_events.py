@@ -412,3 +412,8 @@ def test_the_oracle_plans_on_the_true_map_and_takes_the_other_way_round_a_closed
     closed = replace(ring, doors=tuple(replace(d, open=False) if d.id == "ac" else d for d in ring.doors))
     oracle.attach(Truth(closed))  # type: ignore[arg-type]
     assert oracle._next_door("a", "c")[0].id == "ab"  # replanned round the closed door
+
+
+def test_a_scenario_for_another_scene_is_refused() -> None:
+    with pytest.raises(ConfigError, match="is for scene 'cabin', not 'house:1'; fly it with --scene cabin"):
+        with_scenario(load_scene("house:1"), load_scenario("cabin-person"))
