@@ -417,3 +417,17 @@ def test_the_oracle_plans_on_the_true_map_and_takes_the_other_way_round_a_closed
 def test_a_scenario_for_another_scene_is_refused() -> None:
     with pytest.raises(ConfigError, match="is for scene 'cabin', not 'house:1'; fly it with --scene cabin"):
         with_scenario(load_scene("house:1"), load_scenario("cabin-person"))
+
+
+@pytest.mark.parametrize(("event", "prefix"), [
+    ({"kind": "person", "path": [[5.2, 1.1], [5.2, 1.11]]}, "mover:person-1"),
+    ({"kind": "pet", "path": [[6.2, 1.1], [6.2, 1.11]]}, "mover:pet-1"),
+    ({"kind": "door_closes", "door": "door_bedroom_bathroom"}, "door_leaf:door_bedroom_bathroom"),
+])
+def test_each_mover_and_a_closed_door_are_in_the_front_image(event: dict, prefix: str) -> None:
+    sim = sim_with(event, render=True)
+    sim.reset(Pose(4.0, 1.1, 1.0, 0.0))
+    sim.step("E")  # a door swings shut within a hover
+    ids = sim.segmentation()
+    mine = [g for g in range(sim.model.ngeom) if sim.geom_name(g).startswith(prefix)]
+    assert np.isin(ids, mine).mean() > 0.01
