@@ -390,3 +390,44 @@ def test_a_mission_stage_reported_unreachable_ends_the_mission_unreachable() -> 
     result = run_episode(sim, OraclePilot(), mission, EpisodeConfig(max_steps=60, seed=1), spawn="living_room")
     assert result.outcome == "unreachable" and result.stages_reached == 1 and result.failed_stage == 2
     assert "stage 2/2" in result.reason
+
+
+def test_the_oracle_plans_on_the_true_map_and_takes_the_other_way_round_a_closed_door() -> None:
+    from vlnpilot.scene.model import Door, Room, Scene
+
+    def room(rid: str, x0: float) -> Room:
+        return Room(rid, rid, ((x0, 0.0), (x0 + 3, 0.0), (x0 + 3, 3.0), (x0, 3.0)))
+
+    ring = Scene("ring", "three rooms in a ring", (room("a", 0), room("b", 3), room("c", 6)),
+                 (Door("ab", ("a", "b"), (3.0, 1.0), 0.8, 2.0, 0.0), Door("bc", ("b", "c"), (6.0, 1.0), 0.8, 2.0, 0.0),
+                  Door("ac", ("a", "c"), (4.5, 3.0), 0.8, 2.0, 90.0)), (), ())
+
+    class Truth:
+        def __init__(self, scene: Scene):
+            self.scene = scene
+
+    oracle = OraclePilot()
+    oracle.attach(Truth(ring))  # type: ignore[arg-type]
+    assert oracle._next_door("a", "c")[0].id == "ac"
+    closed = replace(ring, doors=tuple(replace(d, open=False) if d.id == "ac" else d for d in ring.doors))
+    oracle.attach(Truth(closed))  # type: ignore[arg-type]
+    assert oracle._next_door("a", "c")[0].id == "ab"  # replanned round the closed door
+
+
+def test_a_scenario_for_another_scene_is_refused() -> None:
+    with pytest.raises(ConfigError, match="is for scene 'cabin', not 'house:1'; fly it with --scene cabin"):
+        with_scenario(load_scene("house:1"), load_scenario("cabin-person"))
+
+
+@pytest.mark.parametrize(("event", "prefix"), [
+    ({"kind": "person", "path": [[5.2, 1.1], [5.2, 1.11]]}, "mover:person-1"),
+    ({"kind": "pet", "path": [[6.2, 1.1], [6.2, 1.11]]}, "mover:pet-1"),
+    ({"kind": "door_closes", "door": "door_bedroom_bathroom"}, "door_leaf:door_bedroom_bathroom"),
+])
+def test_each_mover_and_a_closed_door_are_in_the_front_image(event: dict, prefix: str) -> None:
+    sim = sim_with(event, render=True)
+    sim.reset(Pose(4.0, 1.1, 1.0, 0.0))
+    sim.step("E")  # a door swings shut within a hover
+    ids = sim.segmentation()
+    mine = [g for g in range(sim.model.ngeom) if sim.geom_name(g).startswith(prefix)]
+    assert np.isin(ids, mine).mean() > 0.01

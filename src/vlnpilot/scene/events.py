@@ -255,6 +255,9 @@ def with_scenario(scene: Scene, scenario: Scenario | None) -> Scene:
 def validate_scenario(scenario: Scenario, scene: Scene) -> None:
     """Refuse, in one line, an event that names a room, door or wall the scene does not have, or a path that
     does not connect (consecutive rooms must share an open door)."""
+    if scenario.scene != scene.name and not scene.name.startswith(scenario.scene):
+        raise ConfigError(f"scenario {scenario.name} is for scene {scenario.scene!r}, not {scene.name!r}; "
+                          f"fly it with --scene {scenario.scene}")
     rooms = {r.id for r in scene.rooms}
     doors = {d.id: d for d in scene.open_doors()}
 
@@ -286,5 +289,3 @@ def validate_scenario(scenario: Scenario, scene: Scene) -> None:
             check_room(e, e.room)
             if e.at is not None and scene.room_at(*e.at) != e.room:
                 fail(e, f"at {list(e.at)} is not in the room {e.room}")
-    if scenario.scene != scene.name and not scene.name.startswith(scenario.scene):
-        raise ConfigError(f"scenario {scenario.name} is for scene {scenario.scene!r}, not {scene.name!r}")

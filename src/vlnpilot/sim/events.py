@@ -304,7 +304,7 @@ class EventWorld:
         for name, e in self.specs.items():
             t = e.trigger
             if name in self.fired or not ((t.step is not None and step >= t.step)
-                                          or (t.time_s is not None and self.seconds >= t.time_s)
+                                          or (t.time_s is not None and self.seconds + 1e-6 >= t.time_s)
                                           or (t.enter is not None and room == t.enter)):
                 continue
             self._fire(e)
