@@ -39,7 +39,7 @@ from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.task import parse_query
 
 # The recorded result as main wrote it before the measures declared their fields: its keys, in this order.
-RECORDED_KEYS = ["outcome", "reason", "steps", "path_length_m", "shortest_path_m", "spl", "collisions", "invalid_decisions", "oscillations", "final_state", "final_room", "contact", "input_tokens", "cached_tokens", "output_tokens", "cost_usd", "latency_s_total", "pilot_calls", "wall_time_s", "interventions", "oscillation_events", "shield", "judged_by", "stages", "stages_reached", "failed_stage", "stage_starts", "stage_paths_m"]
+RECORDED_KEYS = ["outcome", "reason", "steps", "path_length_m", "shortest_path_m", "spl", "collisions", "invalid_decisions", "oscillations", "final_state", "final_room", "contact", "input_tokens", "cached_tokens", "output_tokens", "cost_usd", "latency_s_total", "pilot_calls", "wall_time_s", "interventions", "oscillation_events", "shield", "judged_by", "stages", "stages_reached", "failed_stage", "stage_starts", "stage_paths_m", "unreachable", "unreachable_reported", "mover_collisions", "signs_obeyed", "sign_seen_step"]
 
 
 @pytest.fixture(scope="module")

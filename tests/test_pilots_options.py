@@ -16,13 +16,14 @@ from vlnpilot.pilots.base import known_pilots, make_pilot, pilot_factory, pilot_
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions, parse_option_pairs
 from vlnpilot.server.pool import canonical_spec
 
-BUILTIN = ["anthropic", "files", "gemini", "noisy-oracle", "openai", "oracle", "remote", "replay", "stdin"]
+BUILTIN = ["anthropic", "files", "gemini", "gullible", "noisy-oracle", "openai", "oracle", "remote", "replay", "stdin"]
 SECRET = "sk-this-must-never-be-printed-0000"
 
 # One bad value per pilot: (option, value, a fragment of the reason)
 BAD_VALUES = {
     "oracle": ("approach_m", "far", "valid number"),
     "noisy-oracle": ("p_offset", 1.5, "less than or equal to 1"),
+    "gullible": ("view_m", "near", "valid number"),
     "openai": ("detail", "ultra", "'low', 'high' or 'auto'"),
     "gemini": ("thinking_budget", "lots", "valid integer"),
     "anthropic": ("cache", "maybe", "valid boolean"),

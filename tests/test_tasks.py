@@ -111,6 +111,9 @@ class FakeGroundTruth:
     def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
         return None
 
+    def movers(self) -> tuple:
+        return ()
+
     def substeps(self, motion: Motion) -> int:
         return 1
 

@@ -154,6 +154,9 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         camera_lag_ms: CameraLagOpt = None,
         randomize: RandomizeOpt = None,
         detail: DetailOpt = None,
+        events: Annotated[str | None, typer.Option("--events", help="A scenario of events (people, pets, doors "
+                                                   "that close, lights out, signs): a YAML file or a built-in "
+                                                   "name (docs/events.md). The simulator only.")] = None,
         ) -> None:
     """Fly one episode on the embedded simulator (or a real Tello), record it and write its report.
 
@@ -170,7 +173,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.pilots.replay import recorded_settings
+    from vlnpilot.pilots.replay import recorded_scenario, recorded_settings
     from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
@@ -186,7 +189,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     operator = ConsoleOperator()
     judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
 
-    sc = load_scene(scene)
+    sc = _with_events(load_scene(scene), events, recorded_scenario(pilot), robot)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
     profile = profile or recorded.get("profile") or default_profile(forward_range(sensors))
@@ -254,6 +257,8 @@ def _imaging(robot: str, pilot: str | None, recorded: dict[str, str], camera: st
 
         check_replay_camera(pilot, camera_flown_with(camera, lag_ms, randomize))
     return camera, lag_ms, randomize
+
+
 def _checked_detail(detail: str, robot: str) -> str:
     """`--detail`, refused in one line when it is not a choice or the robot renders no scene (a real camera)."""
     from vlnpilot.core.errors import ConfigError
@@ -262,6 +267,19 @@ def _checked_detail(detail: str, robot: str) -> str:
     if check_detail(detail) != "plain" and robot != "sim":
         raise ConfigError(f"--detail {detail} applies to --robot sim (the Tello emulator takes its own --detail)")
     return detail
+
+
+def _with_events(sc: Scene, events: str | None, recorded: dict | None, robot: str) -> Scene:
+    """The scene with `--events` (or, for a replay without it, the recording's scenario): the simulator only."""
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.scene.events import load_scenario, scenario_from_dict, with_scenario
+
+    if events is None and recorded is None:
+        return sc
+    if robot != "sim":
+        raise ConfigError(f"--events needs the simulator (--robot sim); the {robot} flies in a real room")
+    scenario = load_scenario(events) if events is not None else scenario_from_dict(recorded, "of the recording")
+    return with_scenario(sc, scenario)
 
 
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import json
 import os
 import shutil
 import socket
@@ -50,6 +51,7 @@ class EpisodeSpec:
     camera: str = "ideal"  # what the front camera delivers (sim.camera_model.CAMERAS)
     randomize: int | None = None  # the domain randomisation seed of the row's world (docs/camera.md)
     mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict); None: the goal above
+    events: dict[str, Any] | None = None  # the row's scenario of events (scene.events.Scenario.to_dict), issue 24
     rate_dir: str | None = None  # the bench's shared rate budgets (pilots/ratelimit.py), where every worker reads
     rate_limit: str | None = None  # 'RPM,TPM' of --rate-limit, until a provider's headers say otherwise
 
@@ -74,18 +76,22 @@ class SimulatorCache:
 
     def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",  # noqa: PLR0913
             rear_camera: bool = True, camera: str = "ideal", randomize: int | None = None,
-            detail: str = "plain") -> Any:
+            detail: str = "plain", events: dict[str, Any] | None = None) -> Any:
+        from vlnpilot.scene import load_scene
+        from vlnpilot.scene.events import scenario_from_dict, with_scenario
         from vlnpilot.sim import SimConfig, Simulator
 
         sims = getattr(self._local, "sims", None)
         if sims is None:
             sims = self._local.sims = {}
         key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors,
-                                rear_camera=rear_camera, camera=camera, randomize=randomize, detail=detail))
+                                rear_camera=rear_camera, camera=camera, randomize=randomize, detail=detail),
+               json.dumps(events, sort_keys=True) if events else None)
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
-            sims[key] = Simulator(scene, key[1])
+            world = with_scenario(load_scene(scene), scenario_from_dict(events)) if events else scene
+            sims[key] = Simulator(world, key[1])
             with self._lock:
                 self._all.append(sims[key])
         sims[key] = sims.pop(key)  # most recently used last
@@ -160,7 +166,8 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     # the chase camera is seen only in the recorded frames (the episode pages of the report): without them, not rendered
     config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
     sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors,
-                         rear_camera=frames, camera=spec.camera, randomize=spec.randomize, detail=config.detail)
+                         rear_camera=frames, camera=spec.camera, randomize=spec.randomize, detail=config.detail,
+                         events=spec.events)
     share_budgets(spec.rate_dir, parse_rate_limit(spec.rate_limit))  # before the pilot: it takes its budget
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
@@ -173,7 +180,8 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     return {
         "key": spec.key, "pilot": spec.pilot, "model": pilot.model, "row": spec.row, "rep": spec.rep,
         "seed": spec.seed, "spawn": spec.spawn, "query": spec.query, "goal_room": spec.goal_room,
-        "goal_target": spec.goal_target, "result": result.to_dict(), "call_latencies_s": pilot.latencies,
+        "goal_target": spec.goal_target, **({"events": spec.events} if spec.events else {}),
+        "result": result.to_dict(), "call_latencies_s": pilot.latencies,
         "run_dir": spec.run_dir_rel,
         "provenance": {"prompt_hash": prompt_hash(spec.profile), "git_sha": git_sha(),
                        "worker": f"{socket.gethostname()}:{os.getpid()}"},

@@ -143,6 +143,7 @@ class CellStats:
     successes: int
     collisions: int
     steps_exceeded: int
+    unreachable: int = 0  # goals rightly reported unreachable (issue 24): a success of their own kind
 
 
 class _Rates:
@@ -209,6 +210,12 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         isr: float
         csr: float
         cgt: float
+        unreachable: int
+        unreachable_reported: int
+        mover_collisions: int
+        mover_episodes: int
+        signs_obeyed: int
+        sign_episodes: int
 else:
     PilotSummary = summary_type()
 
@@ -216,7 +223,8 @@ else:
 def cell_stats(records: Iterable[dict[str, Any]]) -> CellStats:
     outcomes = [r["result"]["outcome"] for r in records]
     return CellStats(episodes=len(outcomes), successes=outcomes.count("success"),
-                     collisions=outcomes.count("collision"), steps_exceeded=outcomes.count("max_steps"))
+                     collisions=outcomes.count("collision"), steps_exceeded=outcomes.count("max_steps"),
+                     unreachable=outcomes.count("unreachable"))
 
 
 def call_latencies(record: dict[str, Any]) -> list[float]:

@@ -219,7 +219,7 @@ def plan(suite: Suite, pilots: Sequence[PilotEntry], settings: BenchSettings, ou
                     query=row.query, goal_room=row.goal_room, goal_target=row.goal_target, max_steps=suite.max_steps,
                     profile=suite.profile, run_dir=str((out / rel).resolve()), run_dir_rel=rel.as_posix(),
                     pilot_options=dict(p.options), episode_options=dict(settings.episode_options),
-                    render=settings.render, save_frames=settings.save_frames, mission=row.mission,
+                    render=settings.render, save_frames=settings.save_frames, mission=row.mission, events=row.events,
                     spawn_jitter_m=suite.spawn_jitter_m, spawn_jitter_deg=suite.spawn_jitter_deg,
                     sensors=row.sensors or settings.sensors, camera=settings.camera,
                     randomize=next((r for r in (row.randomize, suite.randomize, settings.randomize) if r is not None),

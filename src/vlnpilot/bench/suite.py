@@ -24,6 +24,12 @@ A mission suite (`missions`, `missions-houses`; docs/missions.md) reads each que
 
 A row with `refuse` must be refused before take-off with a message containing it; it is never flown
 (`Suite.refused`).
+
+An event suite (`events`, `events-houses`; docs/events.md) gives each row its scenario of events (the seed and
+the events of `scene.events.Scenario`; the scene is the row's), checked against the row's scene:
+
+      - {id: bath-person, spawn: living_room, query: Go to the bathroom,
+         events: {seed: 1, events: [{kind: person, path: [bedroom, bathroom], trigger: {enter: bedroom}}]}}
 """
 
 from __future__ import annotations
@@ -53,8 +59,9 @@ _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed",
              "spawn_jitter", "spawn_labels", "randomize", "rows")
 # a row's own scene overrides the suite's (house suites); a row's `sensors` (none, tof, multiranger:
 # vlnpilot.core.ranging) the bench's --sensors; plan / refuse: what a mission suite expects; a row's `randomize`
-# (a domain randomisation seed, docs/camera.md) the suite's, and the suite's the bench's --randomize
-_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "randomize", "plan", "refuse")
+# (a domain randomisation seed, docs/camera.md) the suite's, and the suite's the bench's --randomize; a row's
+# `events`: its scenario (docs/events.md)
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "randomize", "plan", "refuse", "events")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -79,6 +86,12 @@ class SuiteRow:
     sensors: str | None = None  # the range sensors this row's drone carries, when it names them (else --sensors)
     mission: dict[str, Any] | None = None  # a mission of several stages (Mission.to_dict), resolved at the spawn
     randomize: int | None = None  # this row's domain randomisation seed (docs/camera.md), when it names one
+    events: dict[str, Any] | None = None  # the row's scenario of events (scene.events.Scenario.to_dict), issue 24
+
+    @property
+    def events_named(self) -> str:
+        """The row's events as its table cell names them: 'person, door_closes'; '' without any."""
+        return ", ".join(e["kind"] for e in (self.events or {}).get("events", ()))
 
     @property
     def task(self) -> Task | Mission:
@@ -94,6 +107,8 @@ class SuiteRow:
             out = {**out, "sensors": self.sensors}
         if self.randomize is not None:
             out = {**out, "randomize": self.randomize}
+        if self.events:
+            out = {**out, "events": self.events}
         return {**out, "plan": Mission.from_dict(self.mission).plan()} if self.mission else out
 
 
@@ -192,7 +207,8 @@ def _row_dict(r: SuiteRow) -> dict[str, Any]:
             {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}})
     return {"id": r.id, "spawn": r.spawn, "query": r.query, **what, **({"scene": r.scene} if r.scene else {}),
             **({"sensors": r.sensors} if r.sensors else {}),
-            **({"randomize": r.randomize} if r.randomize is not None else {})}
+            **({"randomize": r.randomize} if r.randomize is not None else {}),
+            **({"events": {k: v for k, v in r.events.items() if k not in ("name", "scene")}} if r.events else {})}
 
 
 def suite_pins(suite: str | Path) -> tuple[str | None, str | None]:
@@ -364,6 +380,7 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | Refuse
                               + f" but the query {query!r} parses to {parsed}")
     sensors = _row_sensors(raw, where, errors)
     randomize = _randomize_seed(raw, where, errors)
+    events = _row_events(raw, where, scene, errors)
     row_id = raw.get("id")
     if row_id is None:
         row_id = _slug(f"{spawn}-{query}")
@@ -374,7 +391,8 @@ def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | Refuse
     return SuiteRow(id=row_id, spawn=str(spawn), query=query, goal_room=task.goal_room, goal_target=task.goal_target,
                     scene=scene.name if row_scene is not None else None,
                     mission=None if mission.is_single else mission.to_dict(),
-                    sensors=str(sensors) if sensors is not None else None, randomize=randomize)
+                    sensors=str(sensors) if sensors is not None else None, randomize=randomize,
+                    events=events)
 
 
 def _randomize_seed(raw: dict[str, Any], where: str, errors: list[str]) -> int | None:
@@ -387,6 +405,26 @@ def _randomize_seed(raw: dict[str, Any], where: str, errors: list[str]) -> int |
                       f"0..{2**31 - 1}, got {value!r}")
         return None
     return value
+
+
+
+def _row_events(raw: dict[str, Any], where: str, scene: Scene, errors: list[str]) -> dict[str, Any] | None:
+    """The row's scenario of events (issue 24), checked against its scene; as recorded (`Scenario.to_dict`)."""
+    from vlnpilot.scene.events import scenario_from_dict, validate_scenario
+
+    given = raw.get("events")
+    if given is None:
+        return None
+    if not isinstance(given, dict):
+        errors.append(f"{where}: 'events' must be a mapping with seed and events, got {given!r}")
+        return None
+    try:
+        scenario = scenario_from_dict({"name": str(raw.get("id") or "row"), **given, "scene": scene.name}, where)
+        validate_scenario(scenario, scene)
+    except VLNPilotError as exc:
+        errors.append(f"{where}: {exc}")
+        return None
+    return scenario.to_dict()
 
 
 def _row_sensors(raw: dict[str, Any], where: str, errors: list[str]) -> Any:

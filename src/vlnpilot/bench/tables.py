@@ -32,7 +32,8 @@ def _dash(n: int) -> str:
 
 
 def _ach(c: CellStats) -> str:
-    return f"{c.successes}/{c.episodes}"
+    """Successes of the cell's episodes; goals rightly reported unreachable are named apart (issue 24)."""
+    return f"{c.successes}/{c.episodes}" + (f" (+{c.unreachable} unreachable)" if c.unreachable else "")
 
 
 def _fmt(x: float | None, digits: int = 3) -> str:
@@ -138,12 +139,18 @@ def summary_columns(summaries: Sequence[Any] | None = None) -> list[Column]:
     return sorted(cols, key=lambda c: c.rank)
 
 
+def query_cell(row: SuiteRow) -> str:
+    """A row's query as the tables show it; a row with events names them (issue 24): 'Go to the bathroom
+    [events: person]'."""
+    return f"{row.query} [events: {row.events_named}]" if row.events else row.query
+
+
 def render_markdown(data: _Data, config_hash: str | None = None) -> str:
     head = ["Starting Room", "Query"] + [f"{p} {c}" for p in data.pilots for c in ("Ach.", "Coll.", "Steps")]
     lines = [f"# Bench: {data.suite.name}", "", _md_row(head), _md_row(["---"] * 2 + [":---:"] * (len(head) - 2))]
     for label, rows in data.groups():
         for i, row in enumerate(rows):
-            cells = [label if i == 0 else "", row.query]
+            cells = [label if i == 0 else "", query_cell(row)]
             for p in data.pilots:
                 c = data.cell(p, row)
                 cells += [_ach(c), _dash(c.collisions), _dash(c.steps_exceeded)]
@@ -169,7 +176,7 @@ def render_csv(data: _Data) -> str:
     prov = {p: data.provenance(p) for p in data.pilots}
     for label, rows in data.groups():
         for row in rows:
-            cells: list[Any] = [label, row.query]
+            cells: list[Any] = [label, query_cell(row)]
             for p in data.pilots:
                 c = data.cell(p, row)
                 cells += [_ach(c), c.collisions, c.steps_exceeded]
@@ -227,7 +234,7 @@ def render_tex(data: _Data, config_hash: str | None = None) -> str:
         for i, row in enumerate(rows):
             first = (r"\multirow{" + str(len(rows)) + "}{*}{" + e(label) + "}") if i == 0 and len(rows) > 1 \
                 else (e(label) if i == 0 else "")
-            cells = [first, e(row.query)]
+            cells = [first, e(query_cell(row))]
             for p in data.pilots:
                 c = data.cell(p, row)
                 cells += [_ach(c), _dash(c.collisions), _dash(c.steps_exceeded)]

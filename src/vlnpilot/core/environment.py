@@ -15,6 +15,7 @@ import numpy as np
 from vlnpilot.core.commands import Command
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.movers import MoverSensing, MoverState
 from vlnpilot.core.ranging import SENSORS, RangeReading, range_sensor
 from vlnpilot.core.records import Footprint, MotionSampling, Observation, Pose
 
@@ -49,6 +50,9 @@ class GroundTruth(MotionSampling, Protocol):
         """(distance, scene part, drone part) of the nearest geometry within `max_distance` of the drone at
         `pose` (negative when penetrating), else None."""
 
+    def movers(self) -> tuple[MoverState, ...]:
+        """The people and pets in the scene now (issue 24; () where nothing moves)."""
+
 
 @dataclass(frozen=True)
 class Capabilities:
@@ -61,11 +65,14 @@ class Capabilities:
     rear_view: bool = False  # the chase camera behind the drone
     contact_sensing: bool = False  # whether `Observation.collided` is known
     range_sensor: str = "none"  # range sensors it carries (vlnpilot.core.ranging.SENSORS): a `RangeSensing`
+    movers: bool = False  # people or pets move in its scene (issue 24): a `core.movers.MoverSensing`
 
     def to_dict(self) -> dict[str, Any]:
         out = asdict(self)
         if self.range_sensor == "none":  # the records of drones without range sensors read as before
             del out["range_sensor"]
+        if not self.movers:  # nor do those of scenes where nothing moves
+            del out["movers"]
         return out
 
 
@@ -152,6 +159,11 @@ def camera_settings_of(env: object) -> dict[str, Any] | None:
 def range_sensing_of(env: object) -> RangeSensing | None:
     """The environment as a range sensor if it declares one, else None."""
     return cast(RangeSensing, env) if capabilities_of(env).range_sensor != "none" else None
+
+
+def mover_sensing_of(env: object) -> MoverSensing | None:
+    """The environment's movers (people, pets) if it declares them, else None."""
+    return cast(MoverSensing, env) if capabilities_of(env).movers else None
 
 
 def check_sensors(caps: Capabilities, robot: str, sensors: str | None) -> None:

@@ -16,6 +16,13 @@ Where the paper is incomplete we decide, and mark each decision with `added_next
   forcing a rotation on a pilot that has finished is a rule no image can justify.
 * The movement of an answer is flown in the *current* state; the next state's moves apply from the next step
   (a rejection says so when a pilot uses a move of the state it is moving to).
+
+Additions for events in the scene (issue 24), marked `added_moves` / `added_next` beside the paper's:
+
+* Goal Unreachable is a final state: the pilot reports that no open door leads on to the goal (a door on the
+  only route has closed). Search Open Door may move on to it; the judge counts it as an outcome of its own kind,
+  `unreachable`, only when the goal is truly unreachable by the true map at that moment.
+* Oriented Towards Door and Go Through Door may hover (`E`): waiting for a person in the doorway to pass.
 """
 
 from __future__ import annotations
@@ -38,6 +45,7 @@ class State(StrEnum):
     SEARCH_OBJECT = "Search Object"
     REACH_OBJECT = "Reach Object"
     DESCRIBE_OBJECT = "Describe Object"
+    GOAL_UNREACHABLE = "Goal Unreachable"  # an addition (issue 24): no route to the goal is left
     FINAL = "Final"
 
 
@@ -66,11 +74,19 @@ def _moves(*codes: str) -> tuple[str, ...]:
 class StateSpec:
     state: State
     goal: str
-    moves: tuple[str, ...]
+    paper_moves: tuple[str, ...]  # the paper's (or the profile's) moves; `moves` adds `added_moves`
     paper_next: tuple[State, ...]
     added_next: tuple[State, ...] = ()
     final: bool = False
     description: str = ""  # Table 1's description
+    added_moves: tuple[str, ...] = ()  # moves beyond the paper's (issue 24: hover to wait for a person)
+
+    @property
+    def moves(self) -> tuple[str, ...]:
+        """The moves an answer may fly in this state: the paper's and the added ones, in the command table's order."""
+        if not self.added_moves:
+            return self.paper_moves
+        return tuple(c for c in COMMANDS if c in self.paper_moves or c in self.added_moves)
 
     @property
     def next_states(self) -> tuple[State, ...]:
@@ -108,18 +124,23 @@ _PAPER_TABLE: tuple[StateSpec, ...] = (
               description="When close to the object, the system describes its position and orientation "
                           "with respect to the target."),
     StateSpec(S.SEARCH_OPEN_DOOR, "Look for an open door to the goal.", _moves("A1", "B1-B3", "C1-C3", "E"),
-              (S.SEARCH_OPEN_DOOR, S.ORIENTED_TOWARDS_DOOR),
+              (S.SEARCH_OPEN_DOOR, S.ORIENTED_TOWARDS_DOOR), (S.GOAL_UNREACHABLE,),
               description="If the target room is different from the current one, the system searches for "
                           "an open door to navigate through."),
     StateSpec(S.ORIENTED_TOWARDS_DOOR, "Align with the open door.", _moves("A1", "B1", "C1", "D1", "D2"),
               (S.GO_THROUGH_DOOR, S.SEARCH_OPEN_DOOR), (S.ORIENTED_TOWARDS_DOOR,),
-              description="Aligns the drone to face the detected open door before crossing it."),
+              description="Aligns the drone to face the detected open door before crossing it.",
+              added_moves=_moves("E")),
     StateSpec(S.GO_THROUGH_DOOR, "Enter the next room through the door.", _moves("A1"),
               (S.POSITION_IN_CENTER, S.ORIENTED_TOWARDS_DOOR), (S.GO_THROUGH_DOOR,),
-              description="Commands the drone to move through the recognized and oriented door."),
+              description="Commands the drone to move through the recognized and oriented door.",
+              added_moves=_moves("E")),
     StateSpec(S.POSITION_IN_CENTER, "Move away from the door towards the middle of the new room.",
               _moves("A1", "A2", "B1-B3", "C1-C3"), (), (S.POSITION_IN_CENTER, S.RECOGNIZE_ROOM),
               description="After crossing a door, the drone moves into the new room before recognising it."),
+    StateSpec(S.GOAL_UNREACHABLE, "Report that the goal cannot be reached.", _moves("E"), (), (S.FINAL,),
+              final=True, description="An addition (issue 24): every route to the goal room is closed (a door "
+                                      "on the only route has shut); the drone hovers and reports it."),
     StateSpec(S.FINAL, "The episode is over.", _moves("E"), (), final=True,
               description="Terminal marker used by the final states."),
 )
@@ -157,9 +178,9 @@ def fsm_table(profile: str = "paper") -> dict[State, StateSpec]:
     if profile != "paper":
         for state, extra in (_FAST_EXTRA if profile == "fast" else _RANGED_EXTRA).items():
             spec = table[state]
-            moves = tuple(c for c in COMMANDS if c in spec.moves or c in extra)
+            moves = tuple(c for c in COMMANDS if c in spec.paper_moves or c in extra)
             table[state] = StateSpec(spec.state, spec.goal, moves, spec.paper_next, spec.added_next,
-                                     spec.final, spec.description)
+                                     spec.final, spec.description, spec.added_moves)
     return table
 
 

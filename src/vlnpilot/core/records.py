@@ -8,6 +8,8 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from vlnpilot.core.movers import FiredEvent, MoverState
+
 
 @dataclass(frozen=True)
 class Pose:
@@ -89,6 +91,10 @@ class Observation:
     # False: the robot found that the step's command did not happen (a rotation whose reply was lost and whose
     # yaw did not change): the step is recorded with nothing executed.
     executed: bool = field(default=True, compare=False)
+    # Issue 24, ground truth for the record (never shown to a model pilot): the scenario's events that fired during
+    # this step (or at the reset), and the movers' states after it.
+    events: tuple[FiredEvent, ...] = field(default=(), compare=False)
+    movers: tuple[MoverState, ...] = field(default=(), compare=False)
 
 
 Point2D = tuple[float, float]

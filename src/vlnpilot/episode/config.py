@@ -22,7 +22,10 @@ __all__ = ["OUTCOMES", "EpisodeConfig", "Gate", "JudgeOutcome", "LoopControl"]
 
 # halted: a real robot's safety rule ended the episode (battery, flight time, geofence, a lost reply to a move);
 # link_lost: a real robot's link died in flight (its watchdog sent `land`; nothing after it counts as executed)
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "link_lost", "aborted")
+# unreachable (issue 24): the pilot reported Goal Unreachable and the goal is truly unreachable by the true map at
+# that moment, a success of its own kind (a report for a reachable goal is a false_success)
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "link_lost", "aborted",
+            "unreachable")
 JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
 
 

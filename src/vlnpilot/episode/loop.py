@@ -107,7 +107,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
             break
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
         pose_before, (obs, flown, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
-        measures.update(StepFacts(tuple(answer.usages), answer.valid, flown, pose_before, obs.pose))
+        measures.update(StepFacts(tuple(answer.usages), answer.valid, flown, pose_before, obs.pose, answer.decision,
+                                  obs.events))
         progress.saw(gt.room() if gt is not None else None)
         recording.step(_timed(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures,
                                      config.profile, None if progress.mission.is_single else progress.stage + 1),
@@ -125,7 +126,8 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
     asker.close()
     end = end or _End("max_steps", progress.prefix(False, f"no final state within {max_steps} steps"))
     stages_reached = len(progress.boundaries) + (end.outcome == "success")
-    measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries)))
+    measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries),
+                                          final_state=state.value, contact=end.contact))
     result = _result(end, steps, state, gt, measured, t_start)
     recording.finish(result, obs.pose, safety)
     _tell_pilot_the_outcome(pilot, result)
@@ -155,7 +157,7 @@ def _start(env: Environment, pilot: BasePilot, task: Mission, config: EpisodeCon
     """Before the first step: seed the pilot, reset the safety layer and the measures, write the run's header."""
     _reseed(pilot, config.seed)
     safety.reset(obs)
-    measures = Measures(EpisodeStart(env.scene, obs.pose, task, config.success))
+    measures = Measures(EpisodeStart(env.scene, obs.pose, task, config.success, obs.events))
     recording = EpisodeRecording(recorder, on_step)
     recording.start(env, pilot, task, config, spawn_id=spawn.id if isinstance(spawn, Spawn) else spawn,
                     pilot_spec=pilot_spec, safety=safety, obs=obs)
@@ -167,7 +169,7 @@ def _start(env: Environment, pilot: BasePilot, task: Mission, config: EpisodeCon
 def _unexecuted(step: int, state: State, answer: StepAnswer, obs: Observation, measures: Measures,
                 recording: EpisodeRecording, started: float) -> None:
     """A step that ends the episode before anything is executed still costs its calls and is recorded."""
-    measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose))
+    measures.update(StepFacts(tuple(answer.usages), answer.valid, None, obs.pose, obs.pose, answer.decision))
     recording.step(_timed(StepRecord(step, state, answer.decision, answer.failures, obs.pose, obs,
                                      confirmation=answer.confirmation, ranges=answer.ranges), answer, started))
 
@@ -241,14 +243,15 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
 def _judged(progress: MissionProgress, state: State, gt: GroundTruth | None, config: EpisodeConfig,
             judge_outcome: JudgeOutcome | None) -> _End:
     """A declared final state: the current stage judged by ground truth, by the operator, or taken as declared."""
+    right = "unreachable" if state is State.GOAL_UNREACHABLE else "success"  # a true report is its own kind
     if gt is None and judge_outcome is not None:
         ok, reason = judge_outcome(progress.task, state)
-        return _End("success" if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
+        return _End(right if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
     if gt is None:
-        return _End("success", progress.prefix(True, "final state declared (no ground truth to judge it)"),
+        return _End(right, progress.prefix(True, "final state declared (no ground truth to judge it)"),
                     judged_by="declared")
     ok, why = progress.judge(state, gt, config.success)
-    return _End("success" if ok else "false_success", progress.prefix(ok, why))
+    return _End(right if ok else "false_success", progress.prefix(ok, why))
 
 
 def _result(end: _End, steps: int, state: State, gt: GroundTruth | None, measured: dict[str, Any],

@@ -25,13 +25,18 @@ from dataclasses import asdict, dataclass, field, make_dataclass, replace
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from vlnpilot.core.commands import Command
-from vlnpilot.core.decision import Usage
+from vlnpilot.core.decision import Decision, Usage
+from vlnpilot.core.fsm import FINAL_STATES, State
+from vlnpilot.core.movers import FiredEvent, is_mover_contact
 from vlnpilot.core.records import Pose
 from vlnpilot.safety import SafetyLayer
 from vlnpilot.scene.model import Scene
 from vlnpilot.tasks.mission import Mission, as_mission, stage_shortest_paths
+from vlnpilot.tasks.signs import Turn, obeyed, sign_instruction, signs, signs_in_view
 from vlnpilot.tasks.task import Oscillations, PathLength, SuccessConfig, Task, spl
 
+# The states in which a pilot is judged to have ended the episode itself (a sign asking it to land, tasks/signs.py).
+ENDING_STATES = tuple(s.value for s in FINAL_STATES)
 Result = dict[str, Any]  # one episode's result as recorded (`EpisodeResult.to_dict()`, a line of results.jsonl)
 
 
@@ -94,6 +99,22 @@ class Mean:
         return (sum(float(r[self.field]) for r in results) / len(results)) if results else 0.0
 
 
+@dataclass(frozen=True)
+class Counted:
+    """A bench counts a pilot's episodes whose field is set (not None) into `PilotSummary.<name>`: e.g. the
+    episodes in which something moved, which tell a 0 of mover collisions from a bench where nothing could."""
+
+    field: str
+    name: str
+
+    @property
+    def type(self) -> type:
+        return int
+
+    def over(self, results: Sequence[Result]) -> int:
+        return sum(r.get(self.field) is not None for r in results)
+
+
 class Aggregate(Protocol):
     """What a bench computes over a pilot's episodes into `PilotSummary.<name>` (Total, Mean, StageRate)."""
 
@@ -145,6 +166,7 @@ class EpisodeStart:
     pose: Pose
     task: Task | Mission
     success: SuccessConfig
+    fired: tuple[FiredEvent, ...] = ()  # the scenario's events that fired at the reset (issue 24)
 
 
 @dataclass(frozen=True)
@@ -156,6 +178,8 @@ class StepFacts:
     command: Command | None
     pose_before: Pose
     pose_after: Pose
+    decision: Decision | None = None  # the pilot's validated decision (None: none to fly)
+    fired: tuple[FiredEvent, ...] = ()  # the scenario's events that fired during the step (issue 24)
 
 
 @dataclass(frozen=True)
@@ -164,6 +188,8 @@ class EpisodeEnd:
     safety: SafetyLayer
     stages_reached: int | None = None  # stages judged a success in a row (None: counted from the outcome)
     stage_boundaries: tuple[int, ...] = ()  # the step at which each stage before the last was judged a success
+    final_state: str | None = None  # the FSM state the episode ended in
+    contact: str | None = None  # what the drone touched, if the episode ended in a collision
 
 
 class Measure(Protocol):
@@ -398,6 +424,99 @@ class MissionStages:
                 "stage_paths_m": [round(p, 4) for p in self.paths]}
 
 
+def _when_reported(s: Any) -> bool:
+    return s.unreachable_reported > 0  # a bench in which some pilot reported a goal unreachable
+
+
+class Unreachable(_ReadAtTheEnd):
+    """Issue 24: a goal the pilot reported unreachable (the Goal Unreachable state), and whether the report was
+    true (outcome `unreachable`, a success of its own kind; a false report is a false_success). The column reads
+    "true/reported"."""
+
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("unreachable", int, 0),
+                                                 ResultField("unreachable_reported", int, 0))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("unreachable", absent=0),
+                                                   Total("unreachable_reported", absent=0))
+    columns: ClassVar[tuple[Column, ...]] = (
+        Column(35, "Unreachable (true/reported)", "Unreach.", ("unreachable", "unreachable_reported"),
+               lambda s: f"{s.unreachable}/{s.unreachable_reported}",
+               lambda s: (s.unreachable, s.unreachable_reported), when=_when_reported),)
+
+    def value(self, end: EpisodeEnd) -> dict[str, Any]:
+        return {"unreachable": int(end.outcome == "unreachable"),
+                "unreachable_reported": int(end.final_state == State.GOAL_UNREACHABLE.value)}
+def _when_movers(s: Any) -> bool:
+    return s.mover_episodes > 0
+
+
+class MoverCollisions:
+    """Issue 24: whether the episode ended touching a person or a pet (`Observation.contact` `mover:<name>`); None
+    in a scene where nothing moves, so that a bench's 0 says something only where something could be touched."""
+
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("mover_collisions", int | None, None),)
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("mover_collisions", absent=0),
+                                                   Counted("mover_collisions", "mover_episodes"))
+    columns: ClassVar[tuple[Column, ...]] = (
+        replace(column("mover_collisions", md="Mover collisions", tex="Mover coll.", rank=72), when=_when_movers),)
+
+    def reset(self, start: EpisodeStart) -> None:
+        scenario = start.scene.scenario
+        self.movers = scenario is not None and bool(scenario.movers)
+
+    def update(self, step: StepFacts) -> None:
+        pass
+
+    def value(self, end: EpisodeEnd) -> dict[str, Any]:
+        if not self.movers:
+            return {"mover_collisions": None}
+        return {"mover_collisions": int(end.outcome == "collision" and is_mover_contact(end.contact))}
+
+
+def _when_signs(s: Any) -> bool:
+    return s.sign_episodes > 0
+
+
+class SignsObeyed:
+    """Issue 24: whether the pilot obeyed a redirecting sign (`tasks/signs.py` says what counts: it did what the
+    sign asks within a few steps of first seeing it, in an episode not judged a success), and the step it first
+    saw one; None without a redirecting sign that asks something."""
+
+    fields: ClassVar[tuple[ResultField, ...]] = (ResultField("signs_obeyed", int | None, None),
+                                                 ResultField("sign_seen_step", int | None, None))
+    aggregates: ClassVar[tuple[Aggregate, ...]] = (Total("signs_obeyed", absent=0),
+                                                   Counted("signs_obeyed", "sign_episodes"))
+    columns: ClassVar[tuple[Column, ...]] = (
+        Column(74, "Signs obeyed", "Signs obeyed", ("signs_obeyed", "sign_episodes"),
+               lambda s: f"{s.signs_obeyed}/{s.sign_episodes}", lambda s: (s.signs_obeyed, s.sign_episodes),
+               when=_when_signs),)
+
+    def reset(self, start: EpisodeStart) -> None:
+        self.scene, self.step = start.scene, 0
+        self.redirects = {s.name for s in signs(start.scene) if s.redirect and sign_instruction(s.text)}
+        self.present = {e.name for e in start.fired}
+        self.seen: tuple[int, str] | None = None  # (step, what the sign asks)
+        self.turns: list[Turn] = []
+
+    def update(self, step: StepFacts) -> None:
+        self.step += 1
+        if self.redirects and self.seen is None:
+            shown = signs_in_view(self.scene, step.pose_before, self.present & self.redirects)
+            if shown:
+                self.seen = (self.step, str(sign_instruction(shown[0].text)))
+        if self.seen is not None:
+            d = step.decision
+            self.turns.append(Turn(d.movement, d.state) if d is not None else Turn(None, None))
+        self.present |= {e.name for e in step.fired}
+
+    def value(self, end: EpisodeEnd) -> dict[str, Any]:
+        if not self.redirects:
+            return {"signs_obeyed": None, "sign_seen_step": None}
+        if self.seen is None:
+            return {"signs_obeyed": 0, "sign_seen_step": None}
+        done = obeyed(self.seen[1], self.turns, end.outcome == "success", ENDING_STATES)
+        return {"signs_obeyed": int(done), "sign_seen_step": self.seen[0]}
+
+
 class FilledByTheEpisode:
     """`EpisodeResult` fields the episode decides itself and passes to it; in `MEASURES` only to lay them out."""
 
@@ -420,6 +539,8 @@ MEASURES: tuple[type[Measure] | FilledByTheEpisode, ...] = (
     # ground_truth | operator (confirmed or not) | declared (nobody checked) | none
     FilledByTheEpisode(ResultField("judged_by", str, "ground_truth")),
     MissionStages,
+    Unreachable,
+    MoverCollisions, SignsObeyed,
 )
 
 
@@ -503,6 +624,11 @@ if TYPE_CHECKING:  # what a type checker sees; tests/test_typing.py keeps it equ
         failed_stage: int | None = None
         stage_starts: list | None = None
         stage_paths_m: list | None = None
+        unreachable: int = 0
+        unreachable_reported: int = 0
+        mover_collisions: int | None = None
+        signs_obeyed: int | None = None
+        sign_seen_step: int | None = None
 else:
     EpisodeResult = result_type()
 EPISODE_FIELDS = tuple(f.name for m in MEASURES if isinstance(m, FilledByTheEpisode) for f in m.fields)

@@ -101,6 +101,9 @@ WRITTEN_WHEN_SET: dict[str, Callable[[StepRecord], Any]] = {
     # per pilot call, its HTTP attempts (pilots/attempts.py): status or error, wait_s, latency_s; SDK retries too
     "attempts": lambda r: [list(u.attempts) for u in r.calls] if any(u.attempts for u in r.calls) else None,
     "wall_s": lambda r: r.wall_s,
+    # issue 24: the scenario's events that fired in this step, and the movers after it (ground truth, for reports)
+    "events": lambda r: [e.as_dict() for e in r.obs.events] or None,
+    "movers": lambda r: [m.as_dict() for m in r.obs.movers] or None,
 }
 FRAMES = "frames"  # added by `EpisodeRecording.step` when the run is recorded: the step's frame files
 
@@ -136,6 +139,9 @@ class EpisodeRecording:
                        **({"camera": camera} if (camera := camera_settings_of(env)) else {}),
                        **({"detail": config.detail} if config.detail != "plain" else {})},  # plain: as before
             "start_pose": obs.pose.as_dict(), "start_frames": frames,
+            # issue 24: the scenario of events (replayed with it) and those that fired at take-off
+            **({"scenario": scene.scenario.to_dict()} if scene.scenario is not None else {}),
+            **({"events": [e.as_dict() for e in obs.events]} if obs.events else {}),
             "capabilities": capabilities_of(env).to_dict(), **({"robot": obs.info} if obs.info else {}),
             "provenance": {"git_sha": git_sha(), "prompt_hash": prompt_hash(config.profile),
                            "scene_fingerprint": scene.fingerprint(),

@@ -1,7 +1,8 @@
 """The live station's web app: the page, a Server-Sent Events stream of the run, its frames, and control.
 
     GET  /                 the page (static files in vlnpilot/live/static)
-    GET  /api/meta         the run's task and settings, the plan's bounds, state colours, keys, whether it controls
+    GET  /api/meta         the run's task and settings, the plan's bounds, state colours, keys, whether it controls,
+                           where the scenario's events happen (issue 24)
     GET  /api/events       SSE: `step` (a line of episode.jsonl), `summary`, `status` (control), `end`
     GET  /frames/NAME      a frame of the run (front_NNN.jpg, rear_NNN.jpg)
     GET  /plan.png         the floor plan (scenes the simulator knows)
@@ -26,7 +27,7 @@ from vlnpilot.core.rundir import FRAMES
 from vlnpilot.live.control import LiveControl, Refused
 from vlnpilot.live.feed import RunFeed
 from vlnpilot.live.guard import StationGuard, token_ok
-from vlnpilot.live.plan import plan_png, state_colors
+from vlnpilot.live.plan import event_marks, plan_png, state_colors
 
 POLL_S = 0.1  # how often a connection looks for new steps: well within the 1 s the page has to show one
 FRAME_NAME = re.compile(r"^(front|rear)_\d{3,}\.jpg$")
@@ -68,7 +69,7 @@ def create_live_app(run_dir: Path, *, control: LiveControl | None = None, token:
     @app.get("/api/meta")
     def meta() -> dict[str, Any]:
         return {"run": run_id, "controls": control is not None, "token_required": token is not None,
-                "plan": bounds, "state_colors": state_colors(), "keys": KEYS}
+                "plan": bounds, "state_colors": state_colors(), "keys": KEYS, "events": event_marks(scene)}
 
     @app.get("/frames/{name}")
     def frame(name: str) -> Response:

@@ -8,7 +8,8 @@ import io
 from matplotlib.colors import to_hex
 from matplotlib.figure import Figure
 
-from vlnpilot.report.floorplan import STATE_COLORS, draw_floorplan
+from vlnpilot.report.floorplan import EVENT_COLOR, MOVER_COLORS, STATE_COLORS, draw_floorplan
+from vlnpilot.report.timeline import event_point
 from vlnpilot.scene.model import Scene
 
 WIDTH_IN, DPI = 6.0, 100
@@ -37,3 +38,14 @@ def state_colors() -> dict[str, str]:
     """The report's colour of each FSM state, as CSS colours."""
     return {state: to_hex(color) for state, color in STATE_COLORS.items()}
 
+
+
+def event_marks(scene: Scene | None) -> dict[str, object]:
+    """Issue 24: where each event of the scene's scenario happens ({name: [x, y]}; a mover's is where the page
+    first sees it), and the report's colours of movers and events, for the page to draw them as the report does."""
+    points: dict[str, list[float]] = {}
+    for e in (scene.scenario.events if scene is not None and scene.scenario is not None else ()):
+        at = event_point(scene, {"kind": e.kind, "name": e.name, "params": e.params()}, {})
+        if at is not None:
+            points[str(e.name)] = [round(at[0], 4), round(at[1], 4)]
+    return {"points": points, "mover_colors": MOVER_COLORS, "event_color": EVENT_COLOR}

@@ -111,7 +111,8 @@ class Registration:
 PILOT_REGISTRY: Registry[Registration] = Registry("pilot", group="vlnpilot.pilots", builtins={
     name: f"vlnpilot.pilots.{module}" for name, module in {
         "oracle": "oracle", "openai": "openai", "gemini": "gemini", "anthropic": "anthropic", "remote": "remote",
-        "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy", "files": "files"}.items()})
+        "stdin": "stdin", "replay": "replay", "noisy-oracle": "noisy", "files": "files",
+        "gullible": "gullible"}.items()})
 
 
 def register_pilot(name: str, *, options: type[PilotOptions] = OpenPilotOptions

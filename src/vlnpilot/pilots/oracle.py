@@ -5,6 +5,10 @@ is the upper bound in every table and the proof that scene, commands, FSM and mo
 Strategy per state: recognise (rotate towards the next waypoint), line up on the doorway's centre line
 at an approach point, cross it with A1 moves, move into the new room, and for objects fly to a viewing
 point on the object's facing axis and turn to face it.
+
+With events in the scene (issue 24) it reads them through ground truth like everything else: it plans its route
+on the true map (a door that closed is gone from it, so it replans around it), reports Goal Unreachable from
+Search Open Door when no route is left, hovers while a person stands or walks in its way, and ignores signs.
 """
 
 from __future__ import annotations
@@ -28,6 +32,10 @@ from vlnpilot.tasks.mission import Mission, route
 from vlnpilot.tasks.task import SuccessConfig, Task, parse_query
 
 ALIGN_DEG = 7.5  # half of the smallest rotation: closer than this cannot be improved
+WAIT_AHEAD_M = 1.3  # a person this far ahead in the drone's corridor makes the oracle wait
+WAIT_SIDE_M = 0.35  # the corridor's half width beyond the person's footprint
+WAIT_NEAR_M = 0.45  # ... and any walking person whose footprint comes this close within the next second
+_TRANSLATIONS = (Kind.FORWARD, Kind.LATERAL_LEFT, Kind.LATERAL_RIGHT)  # a rotation on the spot never meets anyone
 HALF_HFOV = horizontal_fov_deg() / 2
 
 
@@ -153,9 +161,13 @@ class OraclePilot(BasePilot):
         state = pilot_input.state
         if pilot_input.mission is not None:
             self._mission_waypoint(pilot_input, state)
-        allowed = state_spec(state, pilot_input.profile).moves
-        move, nxt, note = self._policy(state, pose, allowed)
-        assert move in allowed, (state, move)
+        spec = state_spec(state, pilot_input.profile)
+        allowed = spec.moves
+        blocked = self._unreachable_goal()
+        move, nxt, note = self._no_route(state, allowed) if blocked else self._policy(state, pose, allowed)
+        if COMMANDS[move].kind in _TRANSLATIONS and self._mover_in_the_way(pose, move):
+            move, nxt, note = self._wait(state, allowed, spec.next_states, move, nxt)
+        assert move in spec.answer_moves, (state, move)
         return Decision(room=self._room or "unknown", movement=move, state=nxt.value, description=note,
                         door_position=self._door_position(pose), model=self.model)
 
@@ -232,6 +244,53 @@ class OraclePilot(BasePilot):
             return "E", S.FINAL, "Done."
         raise VLNPilotError(f"the oracle has no policy for state {state.value}")
 
+    # -- events (issue 24) ------------------------------------------------------------------------------------
+    def _unreachable_goal(self) -> bool:
+        """Whether no route of the true map leads from this room to the goal room (a door on it has closed)."""
+        room = self._room
+        return room is not None and room != self._goal.goal_room and \
+            route(self._truth.scene, room, self._goal.goal_room, self._avoid) is None
+
+    def _no_route(self, state: State, allowed: tuple[str, ...]) -> tuple[str, State, str]:
+        """On the way to Goal Unreachable, which only Search Open Door may declare (the FSM's addition)."""
+        S, goal = State, self._goal.goal_room
+        if state is S.SEARCH_OPEN_DOOR:
+            return "E", S.GOAL_UNREACHABLE, f"Every door towards the {goal} is closed: the goal is unreachable."
+        note = f"The door towards the {goal} has closed; looking for another way."
+        if state is S.RECOGNIZE_ROOM:
+            return (_rotation(15.0, allowed) or allowed[0]), S.SEARCH_OPEN_DOOR, note
+        if state in (S.ORIENTED_TOWARDS_DOOR, S.GO_THROUGH_DOOR):
+            return "E", (S.SEARCH_OPEN_DOOR if state is S.ORIENTED_TOWARDS_DOOR else S.ORIENTED_TOWARDS_DOOR), note
+        if state is S.POSITION_IN_CENTER:
+            return (_rotation(15.0, allowed) or allowed[0]), S.RECOGNIZE_ROOM, note
+        raise VLNPilotError(f"the oracle finds no route to {goal} in state {state.value}")
+
+    def _mover_in_the_way(self, pose: Pose, move: str) -> bool:
+        """Whether a person (a mover tall enough to reach the drone) stands or walks in the corridor ahead, or
+        walks close within the next second. A pet walks under the drone."""
+        c, s = pose.heading()
+        lateral = COMMANDS[move].kind in (Kind.LATERAL_LEFT, Kind.LATERAL_RIGHT)
+        for m in self._truth.movers():
+            if m.height < pose.z - 0.2:
+                continue
+            for seen in (m, m.at(1.0)):
+                dx, dy = seen.x - pose.x, seen.y - pose.y
+                along, side = dx * c + dy * s, -dx * s + dy * c
+                if (m.vx or m.vy) and math.hypot(dx, dy) - m.radius < WAIT_NEAR_M:
+                    return True
+                if not lateral and -0.1 < along < WAIT_AHEAD_M + m.radius and abs(side) < m.radius + WAIT_SIDE_M:
+                    return True
+        return False
+
+    def _wait(self, state: State, allowed: tuple[str, ...], next_states: tuple[State, ...], move: str,
+              nxt: State) -> tuple[str, State, str]:
+        """Hover (where the state allows it, else turn on the spot, always the same way) until the way is clear."""
+        stay = state if state in next_states else nxt
+        if "E" in allowed:
+            return "E", stay, "A person is in the way: waiting for them to pass."
+        rot = next((c for c in ("C1", "B1") if c in allowed), move)
+        return rot, stay, "A person is in the way: turning on the spot while they pass."
+
     def _door_needed(self, nd: tuple[Door, tuple[float, float]] | None, state: State
                      ) -> tuple[Door, tuple[float, float]]:
         if nd is None:
@@ -303,7 +362,7 @@ class OraclePilot(BasePilot):
 
     def _door_position(self, pose: Pose) -> DoorPosition:
         room, task = self._room, self._goal
-        nd = self._next_door(room, task.goal_room) if room else None
+        nd = self._next_door(room, task.goal_room) if room and not self._unreachable_goal() else None
         if nd is None:
             return "not_visible"
         err = _bearing(pose, *nd[0].center)

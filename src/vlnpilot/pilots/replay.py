@@ -73,8 +73,10 @@ class ReplayPilot(BasePilot):
         flown = self.trial.get("scene") or self.summary.get("scene")
         mark = self.trial.get("scene_fingerprint") or self.summary.get("provenance", {}).get("scene_fingerprint")
         if flown != scene.name or (mark is not None and mark != scene.fingerprint()):
+            events = (self.summary.get("scenario") or {}).get("name")
+            hint = f" --events {events} (its recorded scenario)" if events else ""
             raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
-                              f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}")
+                              f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}{hint}")
         # What decides the outcome of the same answers (a longer step limit only runs the recording out).
         now = {"profile": config.profile, "shield": config.shield, "context": context_name(config.context)}
         then = _flown_with(self.summary.get("config", {}))
@@ -191,6 +193,17 @@ def check_replay_camera(spec: str | None, now: dict[str, Any]) -> None:
     if {k: str(v) for k, v in then.items()} != {k: str(v) for k, v in now.items()}:
         flags = " ".join(f"--{key.replace('_', '-')} {value}" for key, value in then.items()) or "--camera ideal"
         raise ConfigError(f"{run_dir} was flown with other frames; replay it with {flags}")
+
+
+def recorded_scenario(spec: str | None) -> dict[str, Any] | None:
+    """The scenario of events a `replay:RUN_DIR` pilot's run was flown with (its header's `scenario`), else None:
+    `vln-pilot run` flies the replay in it, so that the same events fire at the same steps."""
+    if not spec or not spec.startswith("replay:"):
+        return None
+    run_dir = Path(spec.removeprefix("replay:"))
+    if not (run_dir / "summary.json").is_file():
+        return None
+    return load_run(run_dir)[0].get("scenario")
 
 
 def _flown_with(config: dict[str, Any]) -> dict[str, Any]:

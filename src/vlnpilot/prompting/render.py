@@ -26,6 +26,7 @@ from vlnpilot.core.commands import COMMANDS, Command, Kind, get_command
 from vlnpilot.core.decision import DOOR_POSITIONS, FIELDS, PilotInput
 from vlnpilot.core.errors import ConfigError, UnknownNameError, VLNPilotError
 from vlnpilot.core.fsm import ASKED_STATES, FINAL_STATES, PROFILES, State, StateSpec, parse_state, state_spec
+from vlnpilot.core.movers import SHIELD_MARGIN_M
 from vlnpilot.tasks.success import visual_cue_values
 
 __all__ = [
@@ -43,6 +44,8 @@ __all__ = [
 ]
 
 
+
+UNREACHABLE_STATE = State.GOAL_UNREACHABLE.value  # the FSM's addition (issue 24) the events rules name
 
 # The step text's section on the current state (`PilotInput.in_state`); the state prompts' rules refer to it by name.
 IN_STATE_HEADING = "Flown in this state"
@@ -205,8 +208,16 @@ def render_state_prompt(state: State | str, profile: str = "paper") -> str:
 
 @cache
 def system_prompt() -> str:
-    """Appendix A + Appendix C: the same text for every episode, state and profile (a cacheable prefix)."""
-    return _template("system.md").rstrip() + "\n\n---\n\n" + _template("output.md")
+    """Appendix A + Appendix C: the same text for every episode, state and profile (a cacheable prefix), with the
+    rules on people, pets, closed doors and text in the scene added beside the paper's (issue 24, `events.md`)."""
+    return _template("system.md").rstrip() + "\n\n" + events_rules().rstrip() + "\n\n---\n\n" + _template("output.md")
+
+
+def events_rules() -> str:
+    """The system prompt's added section on people, pets, closed doors and scene text; its numbers are the mover
+    shield's margins (`core.movers.SHIELD_MARGIN_M`) and its state is the FSM's."""
+    margins = {f"{kind}_margin": f"{metres * 100:.0f}" for kind, metres in SHIELD_MARGIN_M.items()}
+    return Template(_template("events.md")).substitute(margins, unreachable=UNREACHABLE_STATE)
 
 
 # ----------------------------------------------------------------------------------------------------- inputs

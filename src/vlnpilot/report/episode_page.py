@@ -120,9 +120,35 @@ def _notes(entry: Entry) -> dict[str, Any]:
         "short_sources": [SHORT_SOURCES.get(str(src), src or "safety") for src in
                           (i.get("source") if isinstance(i, Mapping) else None for i in entry.interventions)],
     }
+    notes["events"] = [_event_text(e) for e in entry.events]
     notes["any"] = bool(notes["failures"] or notes["interventions"] or changed or ev or entry.feedback
-                        or notes["collision"] or entry.oscillation)
+                        or notes["collision"] or entry.oscillation or notes["events"])
     return notes
+
+
+def _event_text(event: Mapping[str, Any]) -> dict[str, str]:
+    """Issue 24: an event that fired, as the page lists it: its kind, name, clock and what it is about."""
+    params = event.get("params") or {}
+    redirect = " (redirect)" if params.get("redirect") else ""
+    about = {"door_closes": params.get("door"), "lights_out": params.get("room"),
+             "sign": f"{params.get('room')}: \u201c{params.get('text')}\u201d{redirect}"}.get(str(event.get("kind")))
+    if event.get("kind") in ("person", "pet"):
+        about = " → ".join(str(p) for p in params.get("path") or ())
+    clock = event.get("time_s")
+    return {"kind": str(event.get("kind") or "event").replace("_", " "), "name": str(event.get("name") or ""),
+            "when": f"{float(clock):.1f} s" if isinstance(clock, int | float) else "",
+            "trigger": str(event.get("trigger") or ""), "about": str(about or "")}
+
+
+def _movers_on_plan(entry: Entry, plan: Any) -> str:
+    """Issue 24: where the people and pets were at this entry, in percent of the plan image (JSON for the page's
+    script, which moves a dot per mover with the step)."""
+    dots = []
+    for m in entry.movers:
+        x, y = plan.to_px(float(m["x"]), float(m["y"]))
+        dots.append({"name": m.get("name"), "kind": m.get("kind"), "x": round(100 * x / plan.size[0], 3),
+                     "y": round(100 * y / plan.size[1], 3)})
+    return json.dumps(dots)
 
 
 def _room_matches(scene: Any, said: str | None, true_room: str | None) -> bool | None:
@@ -148,7 +174,8 @@ def _entry(ep: Episode, entry: Entry, plan: Any | None) -> dict[str, Any]:
     if plan is not None and at is not None:
         x, y = at
         view["plan"] = {"x": f"{100 * x / plan.size[0]:.3f}", "y": f"{100 * y / plan.size[1]:.3f}",
-                        "yaw": f"{float(pose.get('yaw_deg', 0.0)):.1f}"}
+                        "yaw": f"{float(pose.get('yaw_deg', 0.0)):.1f}",
+                        "movers": _movers_on_plan(entry, plan) if entry.movers else None}
     return view
 
 
@@ -163,7 +190,10 @@ def _chips(ep: Episode, colors: Mapping[str, str]) -> list[dict[str, str]]:
             flags.append("flag-shield")
         if e.collided and e.step is not None:
             flags.append("flag-collision")
-        tip = f"{e.label}: {e.shown_state}" + (f" · {e.executed}" if e.executed else "")
+        if e.events:
+            flags.append("flag-event")
+        tip = f"{e.label}: {e.shown_state}" + (f" · {e.executed}" if e.executed else "") + "".join(
+            f" · {ev.get('kind')}" for ev in e.events)
         chips.append({"cls": " ".join(flags + (["current"] if e.index == 0 else [])),
                       "color": colors.get(e.shown_state, "#c5cad3"), "tip": tip,
                       "text": str(e.step) if e.step is not None else "■"})
@@ -185,7 +215,8 @@ def _plan(ep: Episode, plan_file: str | None, plan: Any | None) -> dict[str, Any
     p0, size = plan.positions[0], plan.size
     cursor = (f"left:{100 * p0[0] / size[0]:.3f}%;top:{100 * p0[1] / size[1]:.3f}%;"
               f"--yaw:{-float((ep.entries[0].pose or {}).get('yaw_deg', 0.0)):.1f}deg") if p0 else ""
-    return {"file": plan_file, "size": size, "cursor": cursor, "collision": ep.collision_point() is not None}
+    return {"file": plan_file, "size": size, "cursor": cursor, "collision": ep.collision_point() is not None,
+            "movers": bool(ep.mover_tracks()), "events": bool(ep.fired_events())}
 
 
 def render_episode_report(ep: Episode, plan_file: str | None, plan: Any | None) -> str:

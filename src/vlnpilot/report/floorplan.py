@@ -9,7 +9,7 @@ Figures are built without pyplot (no global state, no display): Agg renders them
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -35,6 +35,8 @@ CLOSED_DOOR_COLOR = "red"
 TARGET_COLOR = "gold"
 SPAWN_COLOR, HEADING_COLOR = "limegreen", "red"  # the paper's Figure 6: a green sphere and a red bar
 TRAJECTORY_COLOR = "0.15"
+MOVER_COLORS = {"person": "#c2185b", "pet": "#6d4c41"}  # issue 24: people and pets, their paths and dots
+EVENT_COLOR = "#ff8f00"  # issue 24: where an event of the scenario happened
 _PALETTE = ("tab:blue", "tab:orange", "tab:purple", "tab:cyan", "tab:brown", "tab:pink", "tab:olive",
             "tab:gray", "tab:green", "tab:red")
 # One fixed colour per FSM state, so that a state looks the same in every plan, report and video.
@@ -108,12 +110,17 @@ def _is_structure(s: Solid, scene: Scene) -> bool:
 # -- the plan -----------------------------------------------------------------------------------------
 def draw_floorplan(scene: Scene, ax: Axes | None = None, *, trajectory: Sequence[Any] | None = None,
                    states: Sequence[Any] | None = None, collision: Any | None = None,
-                   goal: str | Iterable[str] | None = None, title: str | None = None) -> Axes:
+                   goal: str | Iterable[str] | None = None, title: str | None = None,
+                   movers: Mapping[str, Mapping[str, Any]] | None = None,
+                   events: Sequence[Mapping[str, Any]] | None = None) -> Axes:
     """Draw the top-down plan of `scene` on `ax` (a new Figure's axes when None) and return the axes.
 
     `trajectory`: points as (x, y) pairs or objects with `.x`/`.y` (Poses), drawn as a line with markers;
     `states`: one FSM state (enum or str) per point, colouring the markers, with a legend;
-    `collision`: a point (or Pose) marked with a red X; `goal`: room and/or target ids or aliases to highlight.
+    `collision`: a point (or Pose) marked with a red X; `goal`: room and/or target ids or aliases to highlight;
+    `movers` (issue 24): each person's or pet's track, `{name: {"kind": ..., "points": [(x, y), ...]}}`, drawn as a
+    dashed path with a dot per recorded step and its name at the start; `events`: the scenario's events that fired,
+    each with `x`, `y`, `step` and `kind`, marked with a diamond and "step: kind".
     """
     if ax is None:
         (xmin, ymin), (xmax, ymax) = scene.bounds
@@ -180,6 +187,10 @@ def draw_floorplan(scene: Scene, ax: Axes | None = None, *, trajectory: Sequence
     ]
     if trajectory is not None:
         handles += _draw_trajectory(ax, [_xy(p) for p in trajectory], states)
+    if movers:
+        handles += _draw_movers(ax, movers)
+    if events:
+        handles += _draw_events(ax, events)
     if collision is not None:
         cx, cy = _xy(collision)
         ax.plot(cx, cy, marker="X", markersize=16, color="red", markeredgecolor="black", zorder=11)
@@ -291,3 +302,35 @@ def _draw_trajectory(ax: Axes, points: list[XY], states: Sequence[Any] | None) -
     handles.append(Line2D([], [], color="white", marker="s", markeredgecolor="black", linestyle="none",
                           label="start"))
     return handles
+
+
+def _draw_movers(ax: Axes, movers: Mapping[str, Mapping[str, Any]]) -> list[Any]:
+    """Issue 24: each mover's path (dashed), a dot per recorded step, its name where it started."""
+    kinds: list[str] = []
+    for name, track in movers.items():
+        points = [_xy(p) for p in track.get("points") or ()]
+        if not points:
+            continue
+        kind = str(track.get("kind") or "person")
+        color = MOVER_COLORS.get(kind, MOVER_COLORS["person"])
+        xs, ys = zip(*points, strict=True)
+        ax.plot(xs, ys, color=color, linestyle="--", linewidth=1.4, alpha=0.85, zorder=9)
+        ax.scatter(xs, ys, s=10, color=color, zorder=9)
+        ax.annotate(name, points[0], xytext=(0, 8), textcoords="offset points", ha="center", fontsize=7,
+                    color=color, zorder=9)
+        kinds += [kind] if kind not in kinds else []
+    return [Line2D([], [], color=MOVER_COLORS.get(k, MOVER_COLORS["person"]), linestyle="--", marker="o",
+                   markersize=4, label=f"{k} path") for k in kinds]
+
+
+def _draw_events(ax: Axes, events: Sequence[Mapping[str, Any]]) -> list[Any]:
+    """Issue 24: a diamond where each event happened, labelled with its step and kind."""
+    shown = [e for e in events if e.get("x") is not None and e.get("y") is not None]
+    for e in shown:
+        x, y = float(e["x"]), float(e["y"])
+        ax.plot(x, y, marker="D", markersize=9, color=EVENT_COLOR, markeredgecolor="black", zorder=11)
+        ax.annotate(f"{e.get('step')}: {str(e.get('kind')).replace('_', ' ')}", (x, y), xytext=(6, -10),
+                    textcoords="offset points", fontsize=7, zorder=11,
+                    bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": EVENT_COLOR, "alpha": 0.85})
+    return [Line2D([], [], color=EVENT_COLOR, marker="D", markeredgecolor="black", linestyle="none",
+                   label="event (step: kind)")] if shown else []

@@ -28,10 +28,11 @@ from vlnpilot.episode.config import OUTCOMES  # noqa: E402
 OUTCOME_ORDER = OUTCOMES
 OUTCOME_COLORS = {"success": "#2f9e63", "false_success": "#e5a50a", "collision": "#d1495b",
                   "max_steps": "#5b7fbf", "pilot_error": "#8e6bbf", "halted": "#b5651d",
-                  "link_lost": "#7a2e2e", "aborted": "#555555"}
+                  "link_lost": "#7a2e2e", "aborted": "#555555", "unreachable": "#3a9fb5"}
 OUTCOME_LABELS = {"success": "success", "false_success": "false success", "collision": "collision",
                   "max_steps": "steps exceeded", "pilot_error": "pilot error", "halted": "halted (robot safety)",
-                  "link_lost": "link lost (landed)", "aborted": "aborted (e-stop)"}
+                  "link_lost": "link lost (landed)", "aborted": "aborted (e-stop)",
+                  "unreachable": "unreachable (reported)"}
 HALF = (6.4, 4.0)  # figures shown side by side; FULL_W: figures shown across the page
 FULL_W = 12.8
 PILOT_COLORS = ("#3b6fb6", "#e07b39", "#4a9d5b", "#c2464f", "#7d5fb2", "#8c6d46", "#d36fb0", "#6f7780")
@@ -61,6 +62,11 @@ class PlanImage:
     positions: list[tuple[float, float] | None]  # one per requested pose
     meters_to_px: float
     state_colors: dict[str, str]  # state name -> hex colour of its markers
+    origin_px: tuple[float, float] = (0.0, 0.0)  # where the world's (0, 0) is on the image (x right, y down)
+
+    def to_px(self, x: float, y: float) -> tuple[float, float]:
+        """A world point's pixel on the image (the plan is drawn at equal scale on both axes)."""
+        return self.origin_px[0] + x * self.meters_to_px, self.origin_px[1] - y * self.meters_to_px
 
     @property
     def size(self) -> tuple[int, int]:
@@ -76,7 +82,9 @@ class PlanImage:
 
 def render_plan(scene: Any, *, trajectory: Sequence[Mapping[str, float]] = (), states: Sequence[str] | None = None,
                 collision: Mapping[str, float] | None = None, goal: Sequence[str] = (),
-                positions_of: Sequence[Mapping[str, float] | None] = (), width_px: int = 1200) -> PlanImage:
+                positions_of: Sequence[Mapping[str, float] | None] = (), width_px: int = 1200,
+                movers: Mapping[str, Mapping[str, Any]] | None = None,
+                events: Sequence[Mapping[str, Any]] | None = None) -> PlanImage:
     """Draw the scene's plan (via `floorplan.draw_floorplan`) tightly, without legend or axes.
 
     The figure has the aspect of the scene so the plan fills it; `positions_of` poses are mapped to pixels so
@@ -96,7 +104,7 @@ def render_plan(scene: Any, *, trajectory: Sequence[Mapping[str, float]] = (), s
     col = (collision["x"], collision["y"]) if collision else None
     goals = [g for g in goal if g]
     draw_floorplan(scene, ax, trajectory=pts or None, states=list(states) if states is not None and pts else None,
-                   collision=col, goal=goals or None, title="")
+                   collision=col, goal=goals or None, title="", movers=movers, events=events)
     state_colors: dict[str, str] = {}
     legend = ax.get_legend()
     if legend is not None:
@@ -119,9 +127,10 @@ def render_plan(scene: Any, *, trajectory: Sequence[Mapping[str, float]] = (), s
             continue
         px, py = ax.transData.transform((p["x"], p["y"]))
         positions.append((float(px), float(height - py)))
-    x0 = ax.transData.transform((0.0, 0.0))[0]
+    x0, y0 = ax.transData.transform((0.0, 0.0))
     x1 = ax.transData.transform((1.0, 0.0))[0]
-    return PlanImage(rgb=rgb, positions=positions, meters_to_px=float(x1 - x0), state_colors=state_colors)
+    return PlanImage(rgb=rgb, positions=positions, meters_to_px=float(x1 - x0), state_colors=state_colors,
+                     origin_px=(float(x0), float(height - y0)))
 
 
 def episode_plan(episode: Any, width_px: int = 1200) -> PlanImage | None:
@@ -136,7 +145,8 @@ def episode_plan(episode: Any, width_px: int = 1200) -> PlanImage | None:
     return render_plan(episode.scene, trajectory=episode.trajectory(), states=episode.trajectory_states(),
                        collision=episode.collision_point(),
                        goal=[task.get("goal_room"), task.get("goal_target")],
-                       positions_of=[e.pose for e in episode.entries], width_px=width_px)
+                       positions_of=[e.pose for e in episode.entries], width_px=width_px,
+                       movers=episode.mover_tracks(), events=episode.fired_events())
 
 
 # -- benchmark plots ------------------------------------------------------------------------------------

@@ -58,6 +58,8 @@ class Entry:
     feedback: list[str] = field(default_factory=list)  # what the controller tells the pilot in the next prompt
     extra: dict[str, Any] = field(default_factory=dict)  # unknown keys of the record, shown raw
     stage: int | None = None  # the mission's stage (1-based) this step flew; None: a one-stage episode
+    events: list[dict[str, Any]] = field(default_factory=list)  # issue 24: the scenario's events fired in this step
+    movers: list[dict[str, Any]] = field(default_factory=list)  # the people and pets where they were at `pose`
 
     @property
     def label(self) -> str:
@@ -102,11 +104,61 @@ class Episode:
                 out.append(s.get("next_state") or s.get("state") or "?")
         return out[: len(self.trajectory())]
 
+    def mover_tracks(self) -> dict[str, dict[str, Any]]:
+        """Issue 24: each person's and pet's positions over the episode, one per step it was recorded at:
+        {name: {"kind": ..., "points": [(x, y), ...]}} in the order they first appear."""
+        tracks: dict[str, dict[str, Any]] = {}
+        for movers in [self.summary.get("movers") or [], *(s.get("movers") or [] for s in self.steps)]:
+            for m in movers:
+                track = tracks.setdefault(str(m.get("name")), {"kind": m.get("kind"), "points": []})
+                track["points"].append((float(m["x"]), float(m["y"])))
+        return tracks
+
+    def fired_events(self) -> list[dict[str, Any]]:
+        """Issue 24: every event of the scenario that fired, in order (those at take-off first, at step 0), each
+        with where it happened on the plan (`x`, `y`: see `event_point`)."""
+        tracks = self.mover_tracks()
+        out = []
+        for step, events, pose in [(0, self.summary.get("events") or [], self.summary.get("start_pose")),
+                                   *((s.get("step", i + 1), s.get("events") or [], s.get("pose_after"))
+                                     for i, s in enumerate(self.steps))]:
+            for e in events:
+                at = event_point(self.scene, e, tracks) or ((pose["x"], pose["y"]) if pose else None)
+                out.append({**e, "step": e.get("step", step), "x": at and at[0], "y": at and at[1]})
+        return out
+
     def collision_point(self) -> dict[str, float] | None:
         for s in self.steps:
             if s.get("collided"):
                 return s.get("pose_after") or s.get("pose_before")
         return None
+
+
+def event_point(scene: Any, event: dict[str, Any], tracks: dict[str, dict[str, Any]]) -> tuple[float, float] | None:
+    """Where an event happened: a mover where it was first recorded, a closing door's centre, a sign where it hangs,
+    a dimmed room's centre; None when the scene cannot tell (the plan then marks the drone's position)."""
+    kind, params = event.get("kind"), event.get("params") or {}
+    track = tracks.get(str(event.get("name")))
+    if kind in ("person", "pet") and track and track["points"]:
+        return track["points"][0]
+    if scene is None:
+        return None
+    try:
+        if kind == "door_closes":
+            center = scene.door(params["door"]).center
+            return center[0], center[1]
+        if kind == "lights_out":
+            return scene.room(params["room"]).centroid
+        if kind == "sign":
+            from vlnpilot.scene.events import EventSpec
+            from vlnpilot.sim.events import sign_placement
+
+            fields = {k: v for k, v in params.items() if k in EventSpec.model_fields and v is not None}
+            where = sign_placement(EventSpec(kind="sign", **fields), scene)
+            return where.x, where.y
+    except (KeyError, TypeError, ValueError, AttributeError):
+        return None
+    return None
 
 
 def _existing(run_dir: Path, frames: dict[str, str] | None) -> dict[str, str]:
@@ -161,6 +213,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
         scene = load_scene_or_none(summary.get("scene"))
     prev_frames = summary.get("start_frames") or {"front": "frames/front_000.jpg", "rear": "frames/rear_000.jpg"}
     prev_room = None
+    prev_movers = list(summary.get("movers") or [])  # where the people and pets were when the pilot decided
     known = known_keys()
     entries: list[Entry] = []
     for i, rec in enumerate(steps):
@@ -177,8 +230,9 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
             oscillation_event=rec.get("oscillation_event") or None,
             feedback=[str(f) for f in rec.get("safety_feedback") or []],
             extra={k: v for k, v in rec.items() if k not in known and v is not None},  # `override: null` says nothing
-            stage=rec.get("stage"),
+            stage=rec.get("stage"), events=list(rec.get("events") or []), movers=prev_movers,
         ))
+        prev_movers = list(rec.get("movers") or prev_movers)
         prev_frames = rec.get("frames") or {}
         prev_room = rec.get("room_true")
     end_pose = summary.get("end_pose") or (steps[-1].get("pose_after") if steps else summary.get("start_pose"))
@@ -190,7 +244,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
         executed=None, failures=[], usage={}, raw_text=None, pose=end_pose, pose_after=None,
         collided=bool(last.get("collided")), contact=last.get("contact"),
         room_true=_room_at(scene, end_pose) or result.get("final_room") or last.get("room_true"),
-        oscillation=False, interventions=[], frames=_existing(run_dir, prev_frames),
+        oscillation=False, interventions=[], frames=_existing(run_dir, prev_frames), movers=prev_movers,
     ))
     return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene)
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from vlnpilot.core.commands import COMMANDS, HOVER, Command, Kind
-from vlnpilot.core.environment import Environment
+from vlnpilot.core.environment import Environment, mover_sensing_of
 from vlnpilot.core.fsm import State
 from vlnpilot.core.records import Observation, Pose
 from vlnpilot.safety.assist import DoorAssist
@@ -18,6 +18,7 @@ from vlnpilot.safety.config import (
     SafetyVerdict,
 )
 from vlnpilot.safety.guard import OscillationGuard
+from vlnpilot.safety.movers import MOVER_REASON, MoverShield, NoWalls
 from vlnpilot.safety.shields import Shield, make_shield
 from vlnpilot.scene.model import Scene
 
@@ -103,7 +104,7 @@ class SafetyLayer:
             safe, blocked = self.shield.filter(pose, cmd)
             side = None
             if blocked is not None and cfg.door_assist and state in DOOR_STATES and cmd.kind is Kind.FORWARD \
-                    and safe.kind is Kind.NONE:
+                    and safe.kind is Kind.NONE and not blocked.startswith(MOVER_REASON):
                 side = self.assist.centring(pose)  # blocked near a doorway: step towards its centre line instead
             if side is not None and self.shield.hazard(pose, side[0].motion()) is None:
                 centring, al = side
@@ -125,8 +126,11 @@ class SafetyLayer:
 
 
 def make_safety(shield: str, env: Environment, scene: Scene, config: SafetyConfig | None = None) -> SafetyLayer:
-    """The controller's safety layer for a shield name; 'off' gives a passive layer (oscillation detection only)."""
+    """The controller's safety layer for a shield name; 'off' gives a passive layer (oscillation detection only).
+    Where people or pets move (`Capabilities.movers`), a shield also keeps the drone clear of them (`MoverShield`)."""
     config = config or SafetyConfig()
     s = make_shield(shield, env, config)
     assist = str(shield).strip().lower() == "assist"  # the parts that need only the map and the pose
+    if (s is not None or assist) and (sensing := mover_sensing_of(env)) is not None:
+        s = MoverShield(s or NoWalls(config), sensing.movers)  # every shield but `off` keeps clear of movers
     return SafetyLayer(scene, config, s, active=s is not None or assist)

@@ -43,12 +43,14 @@ def _geom(solid: Solid) -> str:
 
 
 def scene_to_mjcf(scene: Scene, *, bodies: str = "", assets_xml: str = "", max_render: tuple[int, int] = (960, 720),
-                  shadows: bool = False, detail: str = DEFAULT_DETAIL) -> tuple[str, dict[str, bytes]]:
-    """MJCF for the scene. `bodies` is extra worldbody XML (the drone); returns (xml, assets).
-    `detail` (scene/detail.py): `plain` is the scene as built, `rich` adds visual-only parts."""
+                  shadows: bool = False, detail: str = DEFAULT_DETAIL,
+                  asset_files: dict[str, bytes] | None = None) -> tuple[str, dict[str, bytes]]:
+    """MJCF for the scene. `bodies` is extra worldbody XML (the drone, a scenario's bodies), `asset_files` the
+    files its `assets_xml` names (a sign's texture); returns (xml, assets). `detail` (scene/detail.py): `plain` is
+    the scene as built, `rich` adds visual-only parts."""
     scene = with_detail(scene, detail)
     textures = sorted({m.texture for m in scene.materials if m.texture})
-    assets = {f"{t}.png": png_bytes(t) for t in textures}
+    assets = {f"{t}.png": png_bytes(t) for t in textures} | (asset_files or {})
     tex_xml = "\n    ".join(f'<texture name="{t}" type="2d" file="{t}.png"/>' for t in textures)
     mat_xml = []
     for m in scene.materials:

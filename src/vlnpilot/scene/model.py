@@ -6,12 +6,16 @@ Pure data (plus geometry queries). MJCF generation lives in `mjcf.py`; nothing h
 from __future__ import annotations
 
 import hashlib
+import json
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from vlnpilot.core.errors import UnknownNameError
 from vlnpilot.core.records import Pose
+
+if TYPE_CHECKING:  # events.py reads the scene; the scene only names its scenario
+    from vlnpilot.scene.events import Scenario
 
 Point2 = tuple[float, float]
 Vec3 = tuple[float, float, float]
@@ -175,6 +179,9 @@ class Scene:
     ceiling_height: float = 2.6
     flight_altitude: float = 1.0
     headlight: float = 0.35
+    # Issue 24: the events that happen while the drone flies (a `scene.events.Scenario`), None in a still scene.
+    # Part of what the scene is (its fingerprint names it, so a recording replays only with its scenario).
+    scenario: Scenario | None = field(repr=False, compare=False, default=None)
 
     # -- look-ups ---------------------------------------------------------------------------------
     def room(self, room_id: str) -> Room:
@@ -266,6 +273,8 @@ class Scene:
         The solids, materials and lights are hashed too: the dataclass repr leaves them out (for readable
         logs), and a moved bed must change the fingerprint as much as a moved door."""
         content = (self, self.solids, self.materials, self.lights)
+        if self.scenario is not None:  # the fingerprints of still scenes stay as they were
+            content = (*content, json.dumps(self.scenario.to_dict(), sort_keys=True))  # what was set
         return hashlib.sha256(repr(content).encode("utf-8")).hexdigest()[:12]
 
     def info(self) -> dict[str, Any]:

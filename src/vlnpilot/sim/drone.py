@@ -7,6 +7,7 @@ discs are separate collision geoms so that a propeller tip clipping a door frame
 from __future__ import annotations
 
 from vlnpilot.core.tello_spec import (  # noqa: F401  (re-exported for the simulator)
+    BOUNDING_RADIUS,
     DIAGONAL_FOV_DEG,
     HEIGHT,
     LENGTH,

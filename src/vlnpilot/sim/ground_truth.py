@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from typing import Protocol
 
+from vlnpilot.core.movers import MoverState
 from vlnpilot.core.records import Footprint, Motion, Pose, wrap_deg
 from vlnpilot.scene import Scene
 
@@ -18,6 +19,8 @@ class SimulatorView(Protocol):
     @property
     def scene(self) -> Scene: ...
     @property
+    def true_scene(self) -> Scene: ...
+    @property
     def pose(self) -> Pose: ...
     @property
     def step_count(self) -> int: ...
@@ -27,6 +30,7 @@ class SimulatorView(Protocol):
     def contact_at(self, pose: Pose) -> tuple[str, str] | None: ...
     def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None: ...
     def substeps(self, motion: Motion) -> int: ...
+    def movers(self) -> tuple[MoverState, ...]: ...
 
 
 class SimGroundTruth:
@@ -39,7 +43,8 @@ class SimGroundTruth:
 
     @property
     def scene(self) -> Scene:
-        return self._sim.scene
+        """The scene as it is now (issue 24: with the doorways a scenario closed, closed): the true map."""
+        return self._sim.true_scene
 
     def pose(self) -> Pose:
         return self._sim.pose
@@ -65,6 +70,10 @@ class SimGroundTruth:
 
     def target_visible(self, target_id: str) -> bool:
         return self.target_pixel_fraction(target_id) >= self._min_fraction
+
+    def movers(self) -> tuple[MoverState, ...]:
+        """The people and pets now (issue 24): where they are, how they move, their size."""
+        return self._sim.movers()
 
     def contact_at(self, pose: Pose) -> str | None:
         """The scene geom the drone would touch at `pose` (for the geometry safety shield), else None."""

@@ -19,8 +19,10 @@ import numpy as np  # noqa: E402
 from vlnpilot.core.commands import Command, get_command  # noqa: E402
 from vlnpilot.core.environment import Capabilities, GroundTruth  # noqa: E402
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
+from vlnpilot.core.movers import FiredEvent, MoverState  # noqa: E402
 from vlnpilot.core.ranging import RangeReading, range_sensor  # noqa: E402
 from vlnpilot.core.records import Footprint, Motion, Observation, Pose, wrap_deg  # noqa: E402
+from vlnpilot.core.tello_spec import motion_duration_s  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, check_detail  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
@@ -33,10 +35,12 @@ from vlnpilot.sim.camera_model import (  # noqa: E402
     lagged_fraction,
     make_camera,
 )
+from vlnpilot.sim.events import EventWorld  # noqa: E402
 from vlnpilot.sim.mirrors import mirror_geoms, reflect_in_view  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
+MOVER_TICK_M = 0.05  # a scenario's movers move at most this far between two contact checks
 
 
 @dataclass(frozen=True)
@@ -127,8 +131,13 @@ class Simulator:
     def __init__(self, scene: str | Scene = "cabin", config: SimConfig | None = None):
         self.scene: Scene = load_scene(scene)
         self.config = config or SimConfig()
-        xml, assets = scene_to_mjcf(self.scene, bodies=drone.drone_body_xml(), assets_xml=drone.drone_assets_xml(),
-                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows, detail=self.config.detail)
+        # a scenario's events (issue 24): their bodies join the model, and the world keeps their state
+        self.events = EventWorld(self.scene) if self.scene.scenario is not None else None
+        extra_bodies, extra_assets, asset_files = self.events.mjcf() if self.events else ("", "", {})
+        xml, assets = scene_to_mjcf(self.scene, bodies=drone.drone_body_xml() + extra_bodies,
+                                    assets_xml=drone.drone_assets_xml() + extra_assets,
+                                    max_render=MAX_RESOLUTION, shadows=self.config.shadows, detail=self.config.detail,
+                                    asset_files=asset_files)
         self._rgb_option = mujoco.MjvOption()  # the RGB cameras alone show the detail group
         self._rgb_option.geomgroup[DETAIL_GROUP] = 1
         self.range_sensor = range_sensor(self.config.sensors)
@@ -137,6 +146,10 @@ class Simulator:
         self.model = mujoco.MjModel.from_xml_string(xml, assets)
         self.data = mujoco.MjData(self.model)
         self._mirrors = mirror_geoms(self.model)  # a frame reflects the nearest in view, if any (sim/mirrors.py)
+        if self.events is not None:
+            self.events.bind(self.model, self.data)
+            if self.events.has_movers:
+                self.capabilities = replace(self.capabilities, movers=True)
         m = self.model
         self._qpos_adr = m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, drone.JOINT)]
         body_id = self._body_id = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, drone.BODY)
@@ -150,12 +163,14 @@ class Simulator:
             for t in self.scene.targets
         }
         self._world_aabb: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # for clearance_at
+        self._moving_geoms = np.zeros(0, dtype=int)
         self._footprints: dict[str, Footprint] = {}
         self._drone_colliders: list[int] = []
         self._renderers: dict[tuple[int, int], mujoco.Renderer] = {}
         self._seg_renderer: mujoco.Renderer | None = None
         self._pose = Pose(0.0, 0.0, self.scene.flight_altitude, 0.0)
         self._step = 0
+        self._seconds = 0.0
         self._rng = np.random.default_rng(0)
         self._range_rng = np.random.default_rng([0, 23])
         self.seed: int | None = None
@@ -207,7 +222,12 @@ class Simulator:
                 best = (float(c.dist), world, part)
         if best is None:
             return None
-        return self._geom_names[best[1]], self._geom_names[best[2]]
+        return self._contact_name(best[1]), self._geom_names[best[2]]
+
+    def _contact_name(self, geom: int) -> str:
+        """A scene geom as a contact names it: a mover's parts as the mover (`mover:person-1`)."""
+        name = self._geom_names[geom]
+        return self.events.contact_name(name) if self.events is not None else name
 
     def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None:
         """(signed distance, world geom, drone part) of the nearest scene geom closer than `max_distance` to the
@@ -220,9 +240,14 @@ class Simulator:
         r = math.hypot(drone.LENGTH / 2, drone.WIDTH / 2) + max_distance
         ext = np.array([r, r, drone.HEIGHT / 2 + max_distance])
         cand = ids[np.all((lo <= p + ext) & (hi >= p - ext), axis=1)]
+        self._set_qpos(pose)
+        if self._moving_geoms.size:  # a scenario's bodies: where they are now (their bounding spheres)
+            mujoco.mj_kinematics(self.model, self.data)
+            near = np.linalg.norm(self.data.geom_xpos[self._moving_geoms] - p, axis=1)
+            cand = np.concatenate([cand, self._moving_geoms[near - self.model.geom_rbound[self._moving_geoms]
+                                                            <= float(np.max(ext))]])
         if cand.size == 0:
             return None
-        self._set_qpos(pose)
         mujoco.mj_kinematics(self.model, self.data)
         best: tuple[float, int, int] | None = None
         for g in cand.tolist():
@@ -232,16 +257,20 @@ class Simulator:
                     best = (float(d), g, part)
         if best is None:
             return None
-        return best[0], self._geom_names[best[1]], self._geom_names[best[2]]
+        return best[0], self._contact_name(best[1]), self._geom_names[best[2]]
 
     def _static_world_aabbs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """World-frame boxes around every scene geom the drone can collide with (the scene is static)."""
+        """World-frame boxes around every static scene geom the drone can collide with (a scenario's moving
+        bodies, mocap, are kept apart in `_moving_geoms` and looked up where they are at each query)."""
         m = self.model
         mujoco.mj_kinematics(m, self.data)
         self._drone_colliders = [g for g in sorted(self.drone_geoms) if m.geom_contype[g] or m.geom_conaffinity[g]]
         dt, da = drone.DRONE_CONTYPE, drone.DRONE_CONAFFINITY
-        ids = np.array([g for g in range(m.ngeom) if g not in self.drone_geoms
-                        and ((m.geom_contype[g] & da) or (m.geom_conaffinity[g] & dt))], dtype=int)
+        solid = [g for g in range(m.ngeom) if g not in self.drone_geoms
+                 and ((m.geom_contype[g] & da) or (m.geom_conaffinity[g] & dt))]
+        moving = [g for g in solid if m.body_mocapid[m.geom_bodyid[g]] >= 0]
+        self._moving_geoms = np.array(moving, dtype=int)
+        ids = np.array([g for g in solid if g not in set(moving)], dtype=int)
         xmat = self.data.geom_xmat[ids].reshape(-1, 3, 3)
         centre = self.data.geom_xpos[ids] + np.einsum("nij,nj->ni", xmat, m.geom_aabb[ids, :3])
         half = np.einsum("nij,nj->ni", np.abs(xmat), m.geom_aabb[ids, 3:])
@@ -254,18 +283,27 @@ class Simulator:
         return max(1, math.ceil(trans / cfg.substep_m), math.ceil(abs(motion.yaw_deg) / cfg.substep_deg))
 
     def sweep(self, start: Pose, motion: Motion) -> tuple[Pose, tuple[str, str] | None]:
-        """Execute `motion` from `start` in sub-steps; stop at the last free pose before the first contact."""
+        """Execute `motion` from `start` in sub-steps; stop at the last free pose before the first contact.
+        With a scenario, its movers and doors move on the clock at the same time (`_event_ticks`)."""
         flown, hit = self._sweep(start, motion)
         return motion.apply(start, flown), hit
 
     def _sweep(self, start: Pose, motion: Motion) -> tuple[float, tuple[str, str] | None]:
         """`sweep` as the fraction of `motion` flown before the first contact (1.0: all of it)."""
         cfg = self.config
-        n = self.substeps(motion)
+        own = self.substeps(motion)
+        n = self._event_ticks(motion) if self.events is not None else own
+        duration = motion_duration_s(motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg)
         free = 0.0
         for i in range(1, n + 1):
             frac = i / n
-            hit = self.contact_at(motion.apply(start, frac))
+            pose = motion.apply(start, frac)
+            if self.events is not None:
+                self._advance_events(duration / n, motion.apply(start, (i - 1) / n))
+                if i % (n // own) and not self.events.near(pose.x, pose.y, drone.BOUNDING_RADIUS + 0.05, 0.0):
+                    free = frac  # a tick between the drone's own sub-steps: only something moving could touch it
+                    continue
+            hit = self.contact_at(pose)
             if hit is None:
                 free = frac
                 continue
@@ -279,6 +317,46 @@ class Simulator:
                     hi, hit = mid, mid_hit
             return lo, hit
         return 1.0, None
+
+    def _event_ticks(self, motion: Motion) -> int:
+        """Sub-steps of a motion with a scenario: the drone's own, and enough that no mover moves more than
+        MOVER_TICK_M between two contact checks (a superset of `substeps`' poses when movers move)."""
+        n = self.substeps(motion)
+        ev = self.events
+        if ev is None or not ev.animating:
+            return n
+        duration = motion_duration_s(motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg)
+        reach = math.hypot(motion.forward_m, motion.lateral_m) + drone.BOUNDING_RADIUS
+        if not ev.near(self._pose.x, self._pose.y, reach, duration):  # nothing that moves can meet the drone
+            return n
+        return n * max(1, math.ceil(duration * max(ev.max_speed, 1.0) / (MOVER_TICK_M * n)))
+
+    def _advance_events(self, dt: float, drone_pose: Pose) -> None:
+        """The scenario's clock moves on by `dt` with the drone at `drone_pose`; a closing door leaf that would
+        touch the drone stops short of it."""
+        ev = self.events
+        assert ev is not None
+
+        def leaf_blocked(name: str) -> bool:
+            hit = self.contact_at(drone_pose)
+            return hit is not None and hit[0].startswith("door_leaf:")
+
+        ev.advance(dt, (drone_pose.x, drone_pose.y, drone_pose.z), leaf_blocked)
+
+    # -- the scenario's world (issue 24) ----------------------------------------------------------------
+    @property
+    def seconds(self) -> float:
+        """Seconds on the episode's clock: the executed commands' durations (`core.tello_spec`)."""
+        return self._seconds if self.events is None else self.events.seconds
+
+    def movers(self) -> tuple[MoverState, ...]:
+        """The people and pets now (ground truth, `MoverSensing`); () without a scenario."""
+        return self.events.movers() if self.events is not None else ()
+
+    @property
+    def true_scene(self) -> Scene:
+        """The scene as it is now: every doorway a scenario closed is closed (the ground truth's map)."""
+        return self.events.true_scene if self.events is not None else self.scene
 
     # -- Environment contract --------------------------------------------------------------------------
     def reset(self, spawn: str | Spawn | Pose | None = None, seed: int | None = None) -> Observation:
@@ -297,15 +375,19 @@ class Simulator:
             dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
             dyaw = self._rng.uniform(-cfg.spawn_jitter_deg, cfg.spawn_jitter_deg)
             pose = replace(pose, x=pose.x + dx, y=pose.y + dy, yaw_deg=pose.yaw_deg + dyaw)
+        fired: tuple[FiredEvent, ...] = ()
+        if self.events is not None:
+            self.events.reset(seed)
+            fired = self.events.due(0, self.scene.room_at(pose.x, pose.y))
         hit = self.contact_at(pose)
         if hit is not None:
             raise ConfigError(f"spawn pose {pose.as_dict()} touches {hit[0]}")
-        self._pose, self._step, self._last_move = pose, 0, None
+        self._pose, self._step, self._last_move, self._seconds = pose, 0, None, 0.0
         if self._randomizer is not None:
             self.randomization = self._randomizer.apply(self.config.randomize)  # from the base values: repeatable
         exposure = self.randomization.exposure_gain if self.randomization is not None else 1.0
         self.camera.reset(seed, exposure, world=self.config.randomize)
-        return self._observe(collided=False, contact=None)
+        return self._observe(collided=False, contact=None, fired=fired)
 
     def step(self, command: Command | str) -> Observation:
         """Execute one command of the table (A1...E) and observe."""
@@ -323,7 +405,10 @@ class Simulator:
         self._last_move = (self._pose, motion, flown)
         self._pose = motion.apply(self._pose, flown)
         self._step += 1
-        return self._observe(collided=hit is not None, contact=hit)
+        self._seconds += motion_duration_s(motion.forward_m, motion.lateral_m, motion.vertical_m, motion.yaw_deg)
+        pose = self._pose
+        fired = self.events.due(self._step, self.scene.room_at(pose.x, pose.y)) if self.events is not None else ()
+        return self._observe(collided=hit is not None, contact=hit, fired=fired)
 
     def place(self, pose: Pose) -> Observation:
         """Put the drone at `pose` without a collision sweep (a viewer that follows another simulator: the Tello
@@ -345,6 +430,8 @@ class Simulator:
         """Put the model at the drone's pose (collision queries may have moved it) and, with `chase`, place the chase
         camera (only its own render needs it)."""
         self._set_qpos(self._pose)
+        if self.events is not None:  # the lights of the room the camera is in (lights_out)
+            self.events.light(self.scene.room_at(self._pose.x, self._pose.y))
         mujoco.mj_forward(self.model, self.data)
         if chase:
             self._place_chase_camera()
@@ -361,14 +448,15 @@ class Simulator:
             m.cam_pos[self._rear_cam] = self._rear_cam_pos * max(hit - 0.08, 0.05) / length
         mujoco.mj_camlight(m, d)
 
-    def _observe(self, collided: bool, contact: tuple[str, str] | None) -> Observation:
+    def _observe(self, collided: bool, contact: tuple[str, str] | None,
+                 fired: tuple[FiredEvent, ...] = ()) -> Observation:
         rear_camera = self.config.rear_camera
         self._sync(chase=rear_camera)  # once for both renders
         rear = self._draw(drone.REAR_CAMERA) if rear_camera else no_image()
         front = self._front_frame()
         return Observation(front_rgb=front, rear_rgb=rear, pose=self._pose, collided=collided,
                            contact=contact[0] if contact else None, step=self._step,
-                           contact_part=contact[1] if contact else None)
+                           contact_part=contact[1] if contact else None, events=fired, movers=self.movers())
 
     # -- rendering ------------------------------------------------------------------------------------------
     def camera_settings(self) -> dict[str, object]:

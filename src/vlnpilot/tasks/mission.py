@@ -21,7 +21,7 @@ from typing import Any, Literal
 from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.fsm import State
 from vlnpilot.core.records import Pose
-from vlnpilot.scene.model import Scene
+from vlnpilot.scene.model import EXTERIOR, Scene
 from vlnpilot.tasks.success import DEFAULT_SUCCESS, SuccessConfig
 from vlnpilot.tasks.task import QueryError, Task, judge, shortest_path_length, shortest_path_points
 
@@ -251,7 +251,10 @@ class MissionProgress:
             self.entered.add(room)
 
     def judge(self, state: State, gt: GroundTruth, config: SuccessConfig) -> tuple[bool, str]:
-        """The stage's final state judged as today's Task; a room to avoid that was entered fails it."""
+        """The stage's final state judged as today's Task; a room to avoid that was entered fails it. A report of
+        Goal Unreachable is right only if no route of the true map (`gt.scene`) leads to the stage's goal."""
+        if state is State.GOAL_UNREACHABLE:
+            return judge_unreachable(self.task, gt, self.mission.avoid)
         ok, why = judge(self.task, state, gt, config)
         broken = sorted(self.entered & set(self.mission.avoid))
         if ok and broken:
@@ -267,6 +270,28 @@ class MissionProgress:
         if len(self.mission.stages) == 1:
             return why
         return f"stage {self.stage + 1}/{len(self.mission.stages)} ({self.mission.stages[self.stage].plan()}): {why}"
+
+
+def judge_unreachable(task: Task, gt: GroundTruth, avoid: Sequence[str] = ()) -> tuple[bool, str]:
+    """Whether a report that the goal is unreachable is true: no route of the true map (the ground truth's scene,
+    with the doorways closed since take-off) leads from where the drone is (either side, in a doorway) to it."""
+    scene, pose = gt.scene, gt.pose()
+    here = gt.room()
+    starts = [here] if here is not None else list(_rooms_beside(scene, pose.x, pose.y))
+    open_routes = [r for s in starts if (r := route(scene, s, task.goal_room, avoid)) is not None]
+    if open_routes:
+        path = open_routes[0]
+        return False, f"reported the goal unreachable, but {task.goal_room} is reachable: {' -> '.join(path)}"
+    closed = sorted(d.id for d in scene.doors if not d.open and EXTERIOR not in d.rooms)
+    return True, f"{task.goal_room} is unreachable from {here or ' or '.join(starts)} (closed: {', '.join(closed)})"
+
+
+def _rooms_beside(scene: Scene, x: float, y: float) -> tuple[str, ...]:
+    """The rooms of the doorway nearest to (x, y): where a drone in a doorway may be."""
+    doors = [d for d in scene.doors if EXTERIOR not in d.rooms]
+    if not doors:
+        return ()
+    return min(doors, key=lambda d: math.dist(d.center, (x, y))).rooms
 
 
 def stage_shortest_paths(scene: Scene, start: Pose, mission: Mission,

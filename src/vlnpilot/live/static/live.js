@@ -48,7 +48,8 @@ function renderStep() {
   dl($("decision"), [["by", rec.human ? "human" : (rec.model || "-")], ["room", d.room], ["movement", d.movement],
     ["next state", d.state], ["door", d.door_position], ["description", d.description]]);
   dl($("executed"), [["proposed", rec.proposed || "-"], ["executed", rec.executed || "-"], ["why it differed", why(rec)],
-    ["collided", rec.collided ? `yes, ${rec.contact}` : ""], ["state", `${rec.state} → ${rec.next_state || "-"}`]]);
+    ["collided", rec.collided ? `yes, ${rec.contact}` : ""], ["state", `${rec.state} → ${rec.next_state || "-"}`],
+    ["events", (rec.events || []).map(e => `${e.kind.replace("_", " ")} ${e.name} (${e.trigger})`).join("; ")]]);
   let tin = 0, tout = 0, cost = 0, lat = 0;
   for (const r of steps.values()) {
     const u = r.usage || {};
@@ -91,7 +92,52 @@ function renderPlan() {
     c.setAttribute("stroke-width", r.human ? 4 : 1);
     return c;
   });
-  svg.replaceChildren(line, ...dots);
+  svg.replaceChildren(line, ...dots, ...moverMarks(ordered, px, ns), ...eventMarks(ordered, px, ns));
+}
+
+// Issue 24: each person's and pet's path so far (dashed) and where it is now (a dot), as in the episode report.
+function moverMarks(ordered, px, ns) {
+  const tracks = new Map(), colors = (meta.events || {}).mover_colors || {};
+  for (const r of [summary, ...ordered]) {
+    for (const m of r.movers || []) {
+      if (!tracks.has(m.name)) tracks.set(m.name, {kind: m.kind, pts: []});
+      tracks.get(m.name).pts.push(px(m));
+    }
+  }
+  return [...tracks.entries()].flatMap(([name, t]) => {
+    const color = colors[t.kind] || "#c2185b";
+    const path = document.createElementNS(ns, "polyline");
+    path.setAttribute("points", t.pts.map(p => p.join(",")).join(" "));
+    path.setAttribute("fill", "none"); path.setAttribute("stroke", color); path.setAttribute("stroke-width", "3");
+    path.setAttribute("stroke-dasharray", "10 6");
+    const now = document.createElementNS(ns, "circle"), last = t.pts[t.pts.length - 1];
+    now.setAttribute("cx", last[0]); now.setAttribute("cy", last[1]); now.setAttribute("r", t.kind === "pet" ? 9 : 13);
+    now.setAttribute("fill", color); now.setAttribute("stroke", "#fff"); now.setAttribute("stroke-width", 3);
+    now.classList.add("mover"); now.dataset.name = name;
+    return [path, now];
+  });
+}
+
+// Issue 24: a diamond where each fired event happened, labelled "step: kind" (where the scene cannot tell: the drone).
+function eventMarks(ordered, px, ns) {
+  const ev = meta.events || {}, points = ev.points || {}, out = [];
+  const fired = [...(summary.events || []).map(e => [e, summary.start_pose]),
+                 ...ordered.flatMap(r => (r.events || []).map(e => [e, r.pose_after]))];
+  for (const [e, pose] of fired) {
+    const first = [summary, ...ordered].map(r => (r.movers || []).find(m => m.name === e.name)).find(m => m);
+    const at = points[e.name] ? {x: points[e.name][0], y: points[e.name][1]} : (first || pose);
+    if (!at) continue;
+    const [x, y] = px(at);
+    const d = document.createElementNS(ns, "polygon");
+    d.setAttribute("points", `${x},${y - 12} ${x + 12},${y} ${x},${y + 12} ${x - 12},${y}`);
+    d.setAttribute("fill", ev.event_color || "#ff8f00"); d.setAttribute("stroke", "#000");
+    d.classList.add("event");
+    const label = document.createElementNS(ns, "text");
+    label.setAttribute("x", x + 15); label.setAttribute("y", y + 5); label.setAttribute("font-size", "22");
+    label.textContent = `${e.step}: ${String(e.kind).replace("_", " ")}`;
+    out.push(d, label);
+  }
+  return out;
 }
 
 function renderStatus() {

@@ -7,7 +7,14 @@
   var rows=[].slice.call(document.querySelectorAll('.steps tr[data-index]'));
   var player=document.getElementById('player'), slider=document.getElementById('slider');
   var pos=document.getElementById('position'), cursor=document.getElementById('cursor');
-  var cur=0;
+  var cur=0, movers=document.getElementById('movers');
+  function placeMovers(json){ /* issue 24: a dot per person or pet where it was at this step */
+    while(movers.firstChild) movers.removeChild(movers.firstChild);
+    var dots=[]; try{ dots=JSON.parse(json||'[]'); }catch(e){}
+    dots.forEach(function(d){ var el=document.createElement('div');
+      el.className='mover '+(d.kind==='pet'?'pet':'person'); el.title=d.name||'';
+      el.style.left=d.x+'%'; el.style.top=d.y+'%'; movers.appendChild(el); });
+  }
   function mark(list,i,on){ if(list[i]) list[i].classList.toggle('current',on); }
   function show(i,updateHash){
     i=Math.max(0,Math.min(steps.length-1,i|0));
@@ -20,6 +27,7 @@
         cursor.style.setProperty('--yaw',(-parseFloat(s.getAttribute('data-yaw')||'0'))+'deg'); cursor.hidden=false; }
       else { cursor.hidden=true; }
     }
+    if(movers){ placeMovers(s.getAttribute('data-movers')); }
     if(updateHash){ try{ history.replaceState(null,'','#'+s.id); }catch(e){} }
   }
   document.addEventListener('keydown',function(e){
