@@ -15,7 +15,7 @@ import pytest
 from cli_support import run_main
 from vlnpilot.core.commands import get_command
 from vlnpilot.core.environment import capabilities_of, mover_sensing_of
-from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.fsm import State
 from vlnpilot.core.movers import MoverState, is_mover_contact
 from vlnpilot.core.records import Pose
@@ -37,7 +37,7 @@ from vlnpilot.scene.events import (
     with_scenario,
 )
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.sim.events import sign_png
+from vlnpilot.sim.events import SIGN_LEGIBLE_PX, sign_png, sign_view
 from vlnpilot.sim.movers import PASS_CLEARANCE_M, YIELD_WAIT_S, Walker, route
 from vlnpilot.tasks.mission import judge_unreachable
 from vlnpilot.tasks.task import parse_query
@@ -327,6 +327,47 @@ def test_a_sign_appears_at_its_trigger_with_its_text_legible() -> None:
     from PIL import Image
     img = np.asarray(Image.open(BytesIO(face)))
     assert (img.mean(axis=2) < 60).mean() > 0.02  # dark text on the light board
+
+
+WALL_SIGN = {"kind": "sign", "room": "living_room", "wall": "south", "along": 0.75, "text": "Land here"}  # x 3.0
+
+
+@pytest.mark.parametrize(("pose", "width", "legible"), [
+    (Pose(3.0, 1.4, 1.0, -90.0), 1.0, True),  # 1.3 m before it, facing it: letters ~29 px high
+    (Pose(3.0, 1.4, 1.0, -90.0), 0.4, False),  # a small sign there: its letters are too small (~12 px)
+    (Pose(3.0, 1.4, 1.0, 0.0), 1.0, False),  # turned away: not in the frame
+    (Pose(2.1, 1.3, 1.0, -90.0), 1.0, False),  # it is cut by the frame's edge
+    (Pose(1.2, 0.4, 1.0, -5.0), 1.0, False),  # along the wall, seen edge-on: the letters are squeezed
+])
+def test_a_sign_is_legible_only_when_its_text_is_large_and_whole_in_the_front_image(pose: Pose, width: float,
+                                                                                     legible: bool) -> None:
+    sign = {**WALL_SIGN, "width_m": width}
+    sim = sim_with(sign)
+    sim.reset(pose)
+    px = sim.sign_text_px("sign-1")
+    assert (px >= SIGN_LEGIBLE_PX) is legible and (sim.legible_signs() == ("sign-1",)) is legible
+    assert sim.ground_truth().sign_text_px("sign-1") == px
+    assert sign_view(load_scenario_event(sign), CABIN, pose).legible is legible  # the projection agrees
+
+
+def load_scenario_event(event: dict) -> EventSpec:
+    return scenario(event).events[0]
+
+
+def test_a_sign_hidden_by_a_person_or_not_yet_there_is_not_legible() -> None:
+    near = Pose(3.0, 1.4, 1.0, -90.0)
+    hidden = sim_with(WALL_SIGN, {"kind": "person", "path": [[3.0, 0.8], [3.0, 0.81]]})
+    hidden.reset(near)
+    assert hidden.sign_text_px("sign-1") == 0.0  # the projection alone would say legible: the render says hidden
+    assert sign_view(load_scenario_event(WALL_SIGN), CABIN, near).legible
+    later = sim_with({**WALL_SIGN, "trigger": {"step": 2}})
+    later.reset(near)
+    assert later.sign_text_px("sign-1") == 0.0
+    later.step("E")
+    later.step("E")
+    assert later.sign_text_px("sign-1") >= SIGN_LEGIBLE_PX
+    with pytest.raises(UnknownNameError, match="valid signs: sign-1"):
+        later.sign_text_px("nowhere")
 
 
 # -- the unreachable outcome and the oracle -------------------------------------------------------------------------
