@@ -19,7 +19,7 @@ Point = tuple[float, float]
 DOOR_APPROACH_M = 1.0  # a walker lines up with a doorway this far before and after it
 YIELD_WAIT_S = 3.0  # a mover that stopped for the drone waits this long (episode clock), then gives way
 # Walking on past a drone it waited for: its footprint's edge stays this far from the drone's centre (the drone's
-# outline reaches ~0.12 m from it, so 0.1 m of air is left; a hovering drone is not touched).
+# outline reaches 0.07 m from it, core.tello_spec.BOUNDING_RADIUS: some 0.15 m of air is left).
 PASS_CLEARANCE_M = 0.22
 
 
