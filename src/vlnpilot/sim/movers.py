@@ -130,8 +130,9 @@ class Walker:
         tx, ty = self.waypoints[self.target]
         dist = math.hypot(tx - self.x, ty - self.y)
         ux, uy = ((tx - self.x) / dist, (ty - self.y) / dist) if dist > 1e-9 else (0.0, 0.0)
-        if (self.retreat_to is None and drone_z < MOVER_HEIGHT[self.kind] + YIELD_DISTANCE_M
-                and self._must_yield(ux, uy, drone, PASS_CLEARANCE_M if self.passing else YIELD_DISTANCE_M)):
+        # (stepping back it walks away from the drone, but yields all the same should the drone come round behind it)
+        if drone_z < MOVER_HEIGHT[self.kind] + YIELD_DISTANCE_M and self._must_yield(
+                ux, uy, drone, PASS_CLEARANCE_M if self.passing else YIELD_DISTANCE_M):
             self.yielding = True
             self.waited_s += dt
             if self.waited_s >= YIELD_WAIT_S - 1e-9:
