@@ -15,7 +15,7 @@ import pytest
 from cli_support import run_main
 from vlnpilot.core.commands import get_command
 from vlnpilot.core.environment import capabilities_of, mover_sensing_of
-from vlnpilot.core.errors import ConfigError
+from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.fsm import State
 from vlnpilot.core.movers import MoverState, is_mover_contact
 from vlnpilot.core.records import Pose
@@ -37,8 +37,8 @@ from vlnpilot.scene.events import (
     with_scenario,
 )
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.sim.events import sign_png
-from vlnpilot.sim.movers import Walker, route
+from vlnpilot.sim.events import SIGN_LEGIBLE_PX, sign_png, sign_view
+from vlnpilot.sim.movers import PASS_CLEARANCE_M, YIELD_WAIT_S, Walker, route
 from vlnpilot.tasks.mission import judge_unreachable
 from vlnpilot.tasks.task import parse_query
 
@@ -156,6 +156,41 @@ def test_a_walker_yields_to_a_drone_in_its_way_but_a_pet_walks_under_a_flying_dr
     assert low.x == 0.0
 
 
+def test_a_walker_that_waited_for_a_drone_walks_on_past_it_when_there_is_room() -> None:
+    w = Walker("p", "person", [(0.0, 0.0), (5.0, 0.0)], 1.0, started=True)
+    drone = (1.5, 0.25 + PASS_CLEARANCE_M + 0.02)  # beside its line: too close to walk by politely, room to pass
+    while not w.yielding:
+        w.advance(0.1, drone)
+    stopped = w.x
+    for _ in range(round(YIELD_WAIT_S / 0.1) - 1):
+        w.advance(0.1, drone)
+        assert w.yielding and w.x == stopped  # it waits for the drone ...
+    w.advance(0.1, drone)
+    w.advance(0.1, drone)
+    assert w.x > stopped and not w.yielding  # ... for YIELD_WAIT_S, then walks on past it
+    while w.x < 2.0:
+        w.advance(0.1, drone)
+        assert math.hypot(w.x - drone[0], w.y - drone[1]) - w.radius >= PASS_CLEARANCE_M - 1e-9
+
+
+def test_a_walker_blocked_by_a_drone_steps_back_stands_aside_and_tries_again_or_leaves() -> None:
+    w = Walker("p", "person", [(0.0, 0.0), (1.0, 0.0), (5.0, 0.0)], 1.0, started=True)
+    drone = (2.0, 0.0)  # right on its path
+    xs = []
+    for _ in range(40):
+        w.advance(0.5, drone)
+        xs.append(w.x)
+    assert max(xs) < 2.0 - 0.25 and min(xs[10:]) < 1.0 + 1e-9  # it never walks into the drone, and steps back
+    assert xs[-1] == 1.0 and xs.count(0.5) >= 4  # and does not stand still for good: it tries again
+    for _ in range(10):
+        w.advance(1.0, (50.0, 50.0))  # the drone made way
+    assert w.done and w.x == 5.0
+    cornered = Walker("p", "person", [(0.0, 0.0), (5.0, 0.0)], 1.0, started=True)
+    for _ in range(int(YIELD_WAIT_S / 0.5) + 1):
+        cornered.advance(0.5, (0.5, 0.0))  # at the start of its path, nowhere to step back to: it leaves
+    assert not cornered.present
+
+
 def test_repeat_walks_the_path_back_and_forth() -> None:
     w = Walker("d", "pet", [(0.0, 0.0), (1.0, 0.0)], 1.0, repeat=True, started=True)
     w.advance(1.5, (50.0, 50.0))
@@ -204,6 +239,32 @@ def test_a_person_enters_walks_on_the_clock_and_is_the_same_for_the_same_seed() 
     assert tracks[0] == tracks[1] and tracks[0] != tracks[2]  # the seed varies the walking speed
     assert tracks[0][0] == (5.0, 1.1) and tracks[0][1][0] > 5.9  # entered at step 1, then ~1.2 m/s for a 1 s hover
     assert math.isclose(a.seconds, 4 * HOVER_S)
+
+
+HOVER_STEPS_FOR_A_PERSON = 8  # a person who stopped for a hovering drone is out of its way within this many hovers
+
+
+@pytest.mark.parametrize(("drone_y", "passes"), [(1.62, True), (1.1, False)])
+def test_a_pilot_that_always_hovers_facing_a_person_in_a_doorway_sees_them_pass(drone_y: float,
+                                                                                  passes: bool) -> None:
+    """The person walks from the bathroom through the doorway into the bedroom, towards a drone that hovers in
+    front of the doorway facing it. It stops for the drone in the doorway, waits a while, then walks on past the
+    drone (beside its way) or steps back out of the doorway (in its way): it never waits there for good."""
+    sim = sim_with({"kind": "person", "path": ["bathroom", "bedroom", [4.3, 1.1]]})
+    sim.reset(Pose(4.9, drone_y, 1.0, math.degrees(math.atan2(1.1 - drone_y, 1.1))))
+    in_doorway = []
+    for _ in range(3):
+        (m,) = sim.step("E").movers
+        in_doorway.append(abs(m.x - 6.0) < 0.4)
+    assert any(in_doorway) and m.vx == 0.0  # it stopped in or at the doorway for the drone
+    for _ in range(HOVER_STEPS_FOR_A_PERSON):
+        obs = sim.step("E")
+        assert not obs.collided
+        (m,) = obs.movers
+        if (m.x < 4.9 - 0.3) if passes else (m.x > 6.0 + 0.6):
+            break
+    else:
+        pytest.fail(f"the person is still at x={m.x:.2f} after {HOVER_STEPS_FOR_A_PERSON} hovers")
 
 
 def test_contact_with_a_person_is_named_as_the_mover() -> None:
@@ -266,6 +327,72 @@ def test_a_sign_appears_at_its_trigger_with_its_text_legible() -> None:
     from PIL import Image
     img = np.asarray(Image.open(BytesIO(face)))
     assert (img.mean(axis=2) < 60).mean() > 0.02  # dark text on the light board
+
+
+WALL_SIGN = {"kind": "sign", "room": "living_room", "wall": "south", "along": 0.75, "text": "Land here"}  # x 3.0
+
+
+@pytest.mark.parametrize(("pose", "width", "legible"), [
+    (Pose(3.0, 1.4, 1.0, -90.0), 1.0, True),  # 1.3 m before it, facing it: letters ~29 px high
+    (Pose(3.0, 1.4, 1.0, -90.0), 0.4, False),  # a small sign there: its letters are too small (~12 px)
+    (Pose(3.0, 1.4, 1.0, 0.0), 1.0, False),  # turned away: not in the frame
+    (Pose(2.1, 1.3, 1.0, -90.0), 1.0, False),  # it is cut by the frame's edge
+    (Pose(1.2, 0.4, 1.0, -5.0), 1.0, False),  # along the wall, seen edge-on: the letters are squeezed
+])
+def test_a_sign_is_legible_only_when_its_text_is_large_and_whole_in_the_front_image(pose: Pose, width: float,
+                                                                                     legible: bool) -> None:
+    sign = {**WALL_SIGN, "width_m": width}
+    sim = sim_with(sign)
+    sim.reset(pose)
+    px = sim.sign_text_px("sign-1")
+    assert (px >= SIGN_LEGIBLE_PX) is legible and (sim.legible_signs() == ("sign-1",)) is legible
+    assert sim.ground_truth().sign_text_px("sign-1") == px
+    assert sign_view(load_scenario_event(sign), CABIN, pose).legible is legible  # the projection agrees
+
+
+def load_scenario_event(event: dict) -> EventSpec:
+    return scenario(event).events[0]
+
+
+def test_a_sign_hidden_by_a_person_or_not_yet_there_is_not_legible() -> None:
+    near = Pose(3.0, 1.4, 1.0, -90.0)
+    hidden = sim_with(WALL_SIGN, {"kind": "person", "path": [[3.0, 0.8], [3.0, 0.81]]})
+    hidden.reset(near)
+    assert hidden.sign_text_px("sign-1") == 0.0  # the projection alone would say legible: the render says hidden
+    assert sign_view(load_scenario_event(WALL_SIGN), CABIN, near).legible
+    later = sim_with({**WALL_SIGN, "trigger": {"step": 2}})
+    later.reset(near)
+    assert later.sign_text_px("sign-1") == 0.0
+    later.step("E")
+    later.step("E")
+    assert later.sign_text_px("sign-1") >= SIGN_LEGIBLE_PX
+    with pytest.raises(UnknownNameError, match="valid signs: sign-1"):
+        later.sign_text_px("nowhere")
+
+
+def _sign_rows() -> list[tuple[str, str]]:
+    from vlnpilot.bench.suite import load_suite
+
+    return [(name, r.id) for name in ("events", "events-houses") for r in load_suite(name).rows
+            if any(e["kind"] == "sign" for e in r.events["events"])]
+
+
+@pytest.mark.parametrize(("suite", "row_id"), _sign_rows())
+def test_every_sign_of_the_event_suites_is_legible_on_the_oracles_route(suite: str, row_id: str) -> None:
+    """The real pilots never saw the sign of h3-1door-sign-redirect (it hung cut by the frame, behind a TV);
+    scripts/check_event_signs.py does the same check on a bench's flights."""
+    from vlnpilot.bench.suite import load_suite
+
+    loaded = load_suite(suite)
+    row = next(r for r in loaded.rows if r.id == row_id)
+    sim = Simulator(with_scenario(load_scene(str(row.scene or loaded.scene)), scenario_from_dict(row.events)),
+                    SimConfig(render=False, rear_camera=False))
+    seen_from: list[Pose] = []  # the pose of each image the pilot was given (the suites' signs fire at take-off)
+    config = EpisodeConfig(max_steps=loaded.max_steps, seed=1)
+    result = run_episode(sim, OraclePilot(), parse_query(row.query, sim.scene), config, spawn=row.spawn,
+                         on_step=lambda rec: seen_from.append(Pose(**rec["pose_before"])))
+    assert result.outcome == "success"
+    assert any(sim.reset(pose) and sim.legible_signs() == ("sign-1",) for pose in seen_from[:5])
 
 
 # -- the unreachable outcome and the oracle -------------------------------------------------------------------------

@@ -33,6 +33,7 @@ HULL_HALF = (0.034, 0.021, 0.0165)
 HULL_Z = -HEIGHT / 2 + HULL_HALF[2]  # hull bottom at the spec-sheet outline; props on top
 
 FRONT_FOVY = vertical_fov_deg()
+CAMERA_FORWARD_M = LENGTH / 2 + 0.002  # the front camera, this far ahead of the body centre, level
 REAR_CAMERA_POS = (-0.55, 0.0, 0.30)  # chase view: behind and above, looking at the drone
 REAR_FOVY = 60.0
 
@@ -66,6 +67,6 @@ def drone_body_xml() -> str:
       {chr(10).join('      ' + p for p in props).strip()}
       <geom name="drone_lens" type="cylinder" size="0.006 0.002" pos="{hx + 0.001:.4f} 0 0" euler="0 1.5708 0"
             material="drone_lens" contype="0" conaffinity="0" group="2"/>
-      <camera name="{FRONT_CAMERA}" pos="{LENGTH / 2 + 0.002:.4f} 0 0" xyaxes="0 -1 0 0 0 1" fovy="{FRONT_FOVY:.3f}"/>
+      <camera name="{FRONT_CAMERA}" pos="{CAMERA_FORWARD_M:.4f} 0 0" xyaxes="0 -1 0 0 0 1" fovy="{FRONT_FOVY:.3f}"/>
       <camera name="{REAR_CAMERA}" pos="{rx} 0 {rz}" xyaxes="0 -1 0 {rz} 0 {-rx}" fovy="{REAR_FOVY}"/>
     </body>"""

@@ -22,6 +22,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
 from vlnpilot.core.movers import CONTACT_PREFIX, FiredEvent, MoverState
+from vlnpilot.core.records import Pose
 from vlnpilot.scene.events import EventSpec, Scenario
 from vlnpilot.scene.mjcf import WORLD_CONAFFINITY, WORLD_CONTYPE
 from vlnpilot.scene.model import Door, Scene
@@ -102,6 +103,46 @@ def _font(size: int) -> ImageFont.FreeTypeFont | ImageFont.ImageFont:
     return ImageFont.load_default(size)
 
 
+@dataclass(frozen=True)
+class SignLayout:
+    """How a sign's text is laid out on its face texture (SIGN_PX): the font size, the lines and their boxes."""
+
+    size: int
+    lines: tuple[str, ...]
+    boxes: tuple[tuple[float, float, float, float], ...]
+
+    @property
+    def line_px(self) -> float:
+        return self.size * 1.2
+
+    @property
+    def cap_px(self) -> float:
+        """The height of a capital letter on the texture (px): what legibility is judged by."""
+        box = _font(self.size).getbbox("H")
+        return float(box[3] - box[1])
+
+    @property
+    def block_px(self) -> tuple[float, float]:
+        """(width, height) of the text block on the texture, centred on it."""
+        return max(b[2] - b[0] for b in self.boxes), self.line_px * len(self.lines)
+
+
+@cache
+def sign_layout(text: str) -> SignLayout:
+    """The text word-wrapped and as large as fits the face (within its border)."""
+    w, h = SIGN_PX
+    draw = ImageDraw.Draw(Image.new("RGB", (8, 8)))
+    for size in range(72, 14, -4):
+        font = _font(size)
+        chars = max(6, int((w - 60) / (size * 0.62)))
+        lines = textwrap.wrap(text, chars) or [""]
+        boxes = [draw.textbbox((0, 0), line, font=font) for line in lines]
+        width = max(b[2] - b[0] for b in boxes)
+        if width <= w - 60 and size * 1.2 * len(lines) <= h - 50:
+            break
+    return SignLayout(size, tuple(lines), tuple(tuple(float(v) for v in b) for b in boxes))
+
+
 def sign_png(text: str, screen: bool) -> bytes:
     """The sign's face: the text, word-wrapped and as large as fits; a dark screen with light text, or a white
     printed sign with black text and a border."""
@@ -110,19 +151,12 @@ def sign_png(text: str, screen: bool) -> bytes:
     img = Image.new("RGB", (w, h), bg)
     draw = ImageDraw.Draw(img)
     draw.rectangle((6, 6, w - 7, h - 7), outline=(90, 90, 100) if screen else (170, 30, 30), width=10)
-    for size in range(72, 14, -4):
-        font = _font(size)
-        chars = max(6, int((w - 60) / (size * 0.62)))
-        lines = textwrap.wrap(text, chars) or [""]
-        boxes = [draw.textbbox((0, 0), line, font=font) for line in lines]
-        width = max(b[2] - b[0] for b in boxes)
-        line_h = size * 1.2
-        if width <= w - 60 and line_h * len(lines) <= h - 50:
-            break
-    y = (h - line_h * len(lines)) / 2
-    for line, box in zip(lines, boxes, strict=True):
+    layout = sign_layout(text)
+    font = _font(layout.size)
+    y = (h - layout.line_px * len(layout.lines)) / 2
+    for line, box in zip(layout.lines, layout.boxes, strict=True):
         draw.text(((w - (box[2] - box[0])) / 2, y), line, fill=fg, font=font)
-        y += line_h
+        y += layout.line_px
     buf = io.BytesIO()
     img.save(buf, format="PNG")
     return buf.getvalue()
@@ -189,6 +223,62 @@ def sign_placement(spec: EventSpec, scene: Scene) -> SignPlacement:
     y = min(max(y0 + a * (y1 - y0), y0 + half), y1 - half)
     x = x1 - WALL_CLEAR if spec.wall == "east" else x0 + WALL_CLEAR
     return SignPlacement(x, y, spec.height_m, math.pi if spec.wall == "east" else 0.0)
+
+
+# A sign's text counts as legible in the front image when a capital letter spans at least this many pixels of a
+# 640x480 frame (the frame the pilots get), whole and unoccluded (issue 24 follow-up: a sign is seen only if legible).
+SIGN_LEGIBLE_PX = 12.0
+LEGIBILITY_FRAME = (640, 480)
+SIGN_VISIBLE_SHARE = 0.98  # of the text block's pixels that must show the sign's face (not a person, furniture, ...)
+
+
+@dataclass(frozen=True)
+class SignView:
+    """A sign's text as the front camera shows it: the projected height of a capital letter (px of a 640x480
+    frame; the smaller of its height and its width, so a sign seen edge-on is not legible), whether the whole text
+    block is in the frame and before the sign's face, and the text block's corners in the frame (u right, v down)."""
+
+    text_px: float
+    in_frame: bool
+    corners: tuple[tuple[float, float], ...]
+
+    @property
+    def legible(self) -> bool:
+        return self.in_frame and self.text_px >= SIGN_LEGIBLE_PX
+
+
+def sign_view(spec: EventSpec, scene: Scene, pose: Pose) -> SignView:
+    """How the front camera at `pose` (level, looking along its yaw) shows the sign's text: pure projection, no
+    occlusion (`Simulator.sign_text_px` adds it)."""
+    from vlnpilot.sim.drone import CAMERA_FORWARD_M, FRONT_FOVY
+
+    where = sign_placement(spec, scene)
+    layout = sign_layout(str(spec.text))
+    m_per_px = spec.width_m / SIGN_PX[0]  # the face's texture spans its width (and 0.6 of it high)
+    cap = layout.cap_px * m_per_px
+    half_w, half_h = layout.block_px[0] * m_per_px / 2, layout.block_px[1] * m_per_px / 2
+    cy, sy = math.cos(pose.yaw_rad), math.sin(pose.yaw_rad)
+    cam = (pose.x + cy * CAMERA_FORWARD_M, pose.y + sy * CAMERA_FORWARD_M, pose.z)
+    fw, fh = LEGIBILITY_FRAME
+    focal = (fh / 2) / math.tan(math.radians(FRONT_FOVY) / 2)
+    ax, ay = -math.sin(where.yaw_rad), math.cos(where.yaw_rad)  # along the face (to its left as one faces it)
+
+    def project(lateral: float, up: float) -> tuple[float, float, float]:
+        dx, dy = where.x + ax * lateral - cam[0], where.y + ay * lateral - cam[1]
+        dz = where.z + up - cam[2]
+        depth = dx * cy + dy * sy
+        right = dx * sy - dy * cy
+        return fw / 2 + focal * right / max(depth, 1e-6), fh / 2 - focal * dz / max(depth, 1e-6), depth
+
+    facing = (cam[0] - where.x) * math.cos(where.yaw_rad) + (cam[1] - where.y) * math.sin(where.yaw_rad) > 0
+    corners = [project(sl * half_w, su * half_h) for sl, su in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    in_frame = facing and all(d > 0.05 and 0 <= u <= fw and 0 <= v <= fh for u, v, d in corners)
+    top, bottom = project(0.0, cap / 2), project(0.0, -cap / 2)
+    left, right = project(-cap / 2, 0.0), project(cap / 2, 0.0)
+    if min(top[2], bottom[2], left[2], right[2]) <= 0.05 or not facing:
+        return SignView(0.0, False, tuple((u, v) for u, v, _ in corners))
+    size = min(abs(bottom[1] - top[1]), math.hypot(right[0] - left[0], right[1] - left[1]))
+    return SignView(size, in_frame, tuple((u, v) for u, v, _ in corners))
 
 
 class EventWorld:

@@ -31,6 +31,8 @@ class SimulatorView(Protocol):
     def clearance_at(self, pose: Pose, max_distance: float) -> tuple[float, str, str] | None: ...
     def substeps(self, motion: Motion) -> int: ...
     def movers(self) -> tuple[MoverState, ...]: ...
+    def sign_text_px(self, name: str) -> float: ...
+    def legible_signs(self) -> tuple[str, ...]: ...
 
 
 class SimGroundTruth:
@@ -74,6 +76,15 @@ class SimGroundTruth:
     def movers(self) -> tuple[MoverState, ...]:
         """The people and pets now (issue 24): where they are, how they move, their size."""
         return self._sim.movers()
+
+    def sign_text_px(self, name: str) -> float:
+        """Issue 24: the projected height (px of a 640x480 front frame) of the sign's capital letters now, when
+        its whole text is in the frame and unoccluded, else 0.0 (`Simulator.sign_text_px`)."""
+        return self._sim.sign_text_px(name)
+
+    def legible_signs(self) -> tuple[str, ...]:
+        """The names of the signs whose text is legible in the front image now (>= SIGN_LEGIBLE_PX)."""
+        return self._sim.legible_signs()
 
     def contact_at(self, pose: Pose) -> str | None:
         """The scene geom the drone would touch at `pose` (for the geometry safety shield), else None."""

@@ -17,6 +17,10 @@ from vlnpilot.scene.model import Scene
 
 Point = tuple[float, float]
 DOOR_APPROACH_M = 1.0  # a walker lines up with a doorway this far before and after it
+YIELD_WAIT_S = 3.0  # a mover that stopped for the drone waits this long (episode clock), then gives way
+# Walking on past a drone it waited for: its footprint's edge stays this far from the drone's centre (the drone's
+# outline reaches 0.07 m from it, core.tello_spec.BOUNDING_RADIUS: some 0.15 m of air is left).
+PASS_CLEARANCE_M = 0.22
 
 
 def route(spec: EventSpec, scene: Scene) -> tuple[list[Point], int | None]:
@@ -84,6 +88,10 @@ class Walker:
     pause_left: float = 0.0
     paused_done: bool = False
     yielding: bool = False
+    waited_s: float = 0.0  # how long it has waited for the drone (reset when it walks on)
+    passing: bool = False  # after waiting: walks on past the drone with PASS_CLEARANCE_M to spare
+    retreat_to: int | None = None  # stepping back to this waypoint to stand aside ...
+    resume: int = 1  # ... then walking on to this one
     heading: float = 0.0  # radians, where it faces
     vx: float = 0.0
     vy: float = 0.0
@@ -122,9 +130,15 @@ class Walker:
         tx, ty = self.waypoints[self.target]
         dist = math.hypot(tx - self.x, ty - self.y)
         ux, uy = ((tx - self.x) / dist, (ty - self.y) / dist) if dist > 1e-9 else (0.0, 0.0)
-        if drone_z < MOVER_HEIGHT[self.kind] + YIELD_DISTANCE_M and self._must_yield(ux, uy, drone):
+        # (stepping back it walks away from the drone, but yields all the same should the drone come round behind it)
+        if drone_z < MOVER_HEIGHT[self.kind] + YIELD_DISTANCE_M and self._must_yield(
+                ux, uy, drone, PASS_CLEARANCE_M if self.passing else YIELD_DISTANCE_M):
             self.yielding = True
+            self.waited_s += dt
+            if self.waited_s >= YIELD_WAIT_S - 1e-9:
+                self._give_way(ux, uy, drone)
             return
+        self.waited_s = 0.0
         self.heading = math.atan2(uy, ux) if dist > 1e-9 else self.heading
         step = self.speed * dt
         if step < dist:
@@ -135,8 +149,8 @@ class Walker:
         self.vx, self.vy = ux * self.speed, uy * self.speed
         self._arrived(dt - dist / self.speed, drone, drone_z)
 
-    def _must_yield(self, ux: float, uy: float, drone: Point) -> bool:
-        """Whether walking on for YIELD_LOOKAHEAD_S would bring its footprint within YIELD_DISTANCE_M of the drone
+    def _must_yield(self, ux: float, uy: float, drone: Point, distance: float = YIELD_DISTANCE_M) -> bool:
+        """Whether walking on for YIELD_LOOKAHEAD_S would bring its footprint within `distance` of the drone
         (only while it closes in: a mover walking away never waits for the drone)."""
         now = math.hypot(drone[0] - self.x, drone[1] - self.y)
         ahead = self.speed * YIELD_LOOKAHEAD_S
@@ -144,10 +158,35 @@ class Walker:
         # the closest approach along the next stretch, not only its end
         t = max(0.0, min(ahead, (drone[0] - self.x) * ux + (drone[1] - self.y) * uy))
         closest = math.hypot(drone[0] - (self.x + ux * t), drone[1] - (self.y + uy * t))
-        return min(closest, later) - self.radius < YIELD_DISTANCE_M and min(closest, later) < now
+        return min(closest, later) - self.radius < distance and min(closest, later) < now
+
+    def _give_way(self, ux: float, uy: float, drone: Point) -> None:
+        """It waited YIELD_WAIT_S for the drone: walk on past it if the stretch to the next waypoint keeps
+        PASS_CLEARANCE_M from it, else step back along the path (to the waypoint before the one it left), else
+        (at the start of its path) leave the scene the way it came."""
+        self.waited_s = 0.0
+        tx, ty = self.waypoints[self.target]
+        length = math.hypot(tx - self.x, ty - self.y)
+        t = max(0.0, min(length, (drone[0] - self.x) * ux + (drone[1] - self.y) * uy))
+        if math.hypot(drone[0] - (self.x + ux * t), drone[1] - (self.y + uy * t)) - self.radius >= PASS_CLEARANCE_M:
+            self.passing = True
+            return
+        back = self.target - self.step_dir
+        while 0 <= back < len(self.waypoints) and math.dist(self.waypoints[back], (self.x, self.y)) < 0.05:
+            back -= self.step_dir
+        if 0 <= back < len(self.waypoints):
+            self.retreat_to, self.resume, self.target = back, self.target, back
+        else:
+            self.leave = self.done = True
 
     def _arrived(self, left_s: float, drone: Point, drone_z: float) -> None:
-        """At waypoint `target`: pause there (the doorway), turn to the next, or stop (or walk back: repeat)."""
+        """At waypoint `target`: pause there (the doorway), turn to the next, or stop (or walk back: repeat); or,
+        having stepped back for the drone, stand aside for YIELD_WAIT_S and then walk on where it was going."""
+        self.passing = False
+        if self.target == self.retreat_to:
+            self.retreat_to, self.target = None, self.resume
+            self.pause_left = YIELD_WAIT_S
+            return
         if self.target == self.pause_at and not self.paused_done:
             self.paused_done = True
             self.pause_left = self.pause_s

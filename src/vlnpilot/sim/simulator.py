@@ -35,7 +35,13 @@ from vlnpilot.sim.camera_model import (  # noqa: E402
     lagged_fraction,
     make_camera,
 )
-from vlnpilot.sim.events import EventWorld  # noqa: E402
+from vlnpilot.sim.events import (  # noqa: E402
+    LEGIBILITY_FRAME,
+    SIGN_LEGIBLE_PX,
+    SIGN_VISIBLE_SHARE,
+    EventWorld,
+    sign_view,
+)
 from vlnpilot.sim.mirrors import mirror_geoms, reflect_in_view  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
@@ -558,6 +564,40 @@ class Simulator:
             raise UnknownNameError("target", target_id, self.target_geoms)
         ids = self.segmentation()
         return float(np.isin(ids, list(self.target_geoms[target_id])).mean())
+
+    def sign_text_px(self, name: str) -> float:
+        """Issue 24: how large the sign `name`'s text is in the front image now: the projected height of a capital
+        letter in px of a 640x480 frame (`sim.events.sign_view`), when the sign has appeared, its whole text block
+        is in the frame before its face, and at least SIGN_VISIBLE_SHARE of it is unoccluded (segmentation render);
+        else 0.0. Legible from `sim.events.SIGN_LEGIBLE_PX`."""
+        if self.events is None or name not in self.events.specs or self.events.specs[name].kind != "sign":
+            raise UnknownNameError("sign", name, [n for n, e in (self.events.specs if self.events else {}).items()
+                                                  if e.kind == "sign"])
+        if name not in self.events.fired:
+            return 0.0
+        view = sign_view(self.events.specs[name], self.scene, self._pose)
+        if not view.in_frame or view.text_px <= 0:
+            return 0.0
+        ids = self.segmentation()
+        h, w = ids.shape
+        sx, sy = w / LEGIBILITY_FRAME[0], h / LEGIBILITY_FRAME[1]
+        quad = np.array([(u * sx, v * sy) for u, v in view.corners])
+        vs, us = np.mgrid[0:h, 0:w] + 0.5
+        inside = np.ones((h, w), bool)  # the pixels of the text block's (convex) quad
+        (ax, ay), (bx, by) = quad[1] - quad[0], quad[2] - quad[1]
+        turn = 1.0 if ax * by - ay * bx >= 0 else -1.0
+        for (x0, y0), (x1, y1) in zip(quad, np.roll(quad, -1, axis=0), strict=True):
+            inside &= turn * ((x1 - x0) * (vs - y0) - (y1 - y0) * (us - x0)) >= 0
+        if not inside.any():  # smaller than a pixel of the segmentation: its centre
+            c = quad.mean(axis=0)
+            inside[min(int(c[1]), h - 1), min(int(c[0]), w - 1)] = True
+        face = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_GEOM, f"sign:{name}:face")
+        return view.text_px if (ids[inside] == face).mean() >= SIGN_VISIBLE_SHARE else 0.0
+
+    def legible_signs(self) -> tuple[str, ...]:
+        """The signs whose text is legible in the front image now (`sign_text_px` >= SIGN_LEGIBLE_PX)."""
+        names = [n for n, e in self.events.specs.items() if e.kind == "sign"] if self.events is not None else []
+        return tuple(n for n in names if self.sign_text_px(n) >= SIGN_LEGIBLE_PX)
 
     def ranges(self) -> tuple[RangeReading, ...]:
         """The range sensors' readings at the current pose (`RangeSensing`); () without any."""
