@@ -61,7 +61,7 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         "pilot_memory": memory,
         "started_at": summary["provenance"]["started_at"],
         "scene": scene_name,
-        "scene_fingerprint": load_scene(scene_name).fingerprint(),
+        "scene_fingerprint": flown_scene(scene_name, summary).fingerprint(),
         "prompt_hash": summary["provenance"]["prompt_hash"],
         "git_sha": summary["provenance"]["git_sha"],
         "context": (summary["config"].get("context") or {}).get("preset", "paper"),
@@ -69,6 +69,9 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         "profile": summary["config"]["profile"],
         "sensors": range_sensor_of(summary),
         **({"camera": camera} if (camera := summary["config"].get("camera")) else {}),  # docs/camera.md
+        **({"detail": detail} if (detail := summary["config"].get("detail")) else {}),  # docs/scenes.md
+        **({"scenario": scenario["name"], "events": [e["kind"] for e in scenario["events"]]}
+           if (scenario := summary.get("scenario")) else {}),  # docs/events.md
         "outcome": summary["result"]["outcome"],
         "steps": summary["result"]["steps"],
     }
@@ -77,6 +80,15 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         shutil.copy2(account, dest / "account.md")
     write_suite(set_dir)
     return dest
+
+
+def flown_scene(name: str, summary: dict):
+    """The scene the run flew in: its recorded scenario of events on it, if it had one (docs/events.md)."""
+    from vlnpilot.scene.events import scenario_from_dict, with_scenario
+
+    scene = load_scene(name)
+    scenario = summary.get("scenario")
+    return with_scenario(scene, scenario_from_dict(scenario, "of the recording")) if scenario else scene
 
 
 def write_suite(set_dir: Path) -> Path:
@@ -93,6 +105,9 @@ def write_suite(set_dir: Path) -> Path:
         sensors = range_sensor_of(summary)
         if sensors != "none":  # the drone it was flown with: a replay must carry the same sensor
             rows[-1]["sensors"] = sensors
+        scenario = summary.get("scenario")
+        if scenario:  # the events it met, as recorded (the row's scene is the scenario's)
+            rows[-1]["events"] = {k: v for k, v in scenario.items() if k != "scene"}  # its name: the fingerprint
         randomize = camera_flown_with(summary["config"]).get("randomize")
         if randomize is not None:  # the world it was flown in: its camera height decides what is visible
             rows[-1]["randomize"] = randomize

@@ -16,6 +16,8 @@ from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.pilots.replay import camera_flown_with
+from vlnpilot.scene import load_scene
+from vlnpilot.scene.events import scenario_from_dict, with_scenario
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.mission import Mission
 from vlnpilot.tasks.success import recorded_success
@@ -27,10 +29,18 @@ ALL = sorted(p.parent for p in TRIALS.glob("*/*/trial.json"))
 
 @pytest.fixture(scope="module")
 def simulators():
-    sims: dict[tuple[str, int | None], Simulator] = {}
-    # a trial flown in a randomised world (docs/camera.md) replays in it: its camera height decides what is visible
-    yield lambda scene, randomize=None: sims.setdefault((scene, randomize), Simulator(scene, SimConfig(
-        render=False, randomize=randomize)))
+    sims: dict[tuple[str, int | None, str], Simulator] = {}
+
+    def simulator(scene: str, randomize: int | None = None, scenario: dict | None = None) -> Simulator:
+        """A trial flown in a randomised world (docs/camera.md) replays in it: its camera height decides what is
+        visible; one flown among events (docs/events.md) replays among the same events, as recorded."""
+        key = (scene, randomize, json.dumps(scenario, sort_keys=True))
+        if key not in sims:
+            world = with_scenario(load_scene(scene), scenario_from_dict(scenario)) if scenario else scene
+            sims[key] = Simulator(world, SimConfig(render=False, randomize=randomize))
+        return sims[key]
+
+    yield simulator
     for sim in sims.values():
         sim.close()
 
@@ -62,7 +72,8 @@ def test_trials_cover_the_paper_suite() -> None:
 @pytest.mark.parametrize("trial_dir", ALL, ids=[f"{p.parent.name}/{p.name}" for p in ALL])
 def test_trial_replays_to_its_recorded_outcome(simulators, trial_dir: Path) -> None:
     trial = json.loads((trial_dir / "trial.json").read_text())
-    sim = simulators(trial["scene"], camera_flown_with(load_run(trial_dir)[0]["config"]).get("randomize"))
+    summary = load_run(trial_dir)[0]
+    sim = simulators(trial["scene"], camera_flown_with(summary["config"]).get("randomize"), summary.get("scenario"))
     assert sim.scene.fingerprint() == trial["scene_fingerprint"], "the scene this trial flew has changed"
     result = replay(sim, trial_dir)
     assert (result.outcome, result.steps) == (trial["outcome"], trial["steps"])
