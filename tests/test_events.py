@@ -460,6 +460,15 @@ def test_hovering_to_wait_never_makes_the_guard_fire() -> None:
     assert all(guard.propose(State.GO_THROUGH_DOOR, hover) is None for _ in range(40))
 
 
+def test_hovers_between_reversals_do_not_hide_an_oscillation_nor_count_as_one() -> None:
+    """The guard counts the moves a pilot flies, not its waits: B1, C1, B1 then six hovers, then C1 is three
+    reversals among four moves (window 8), as without the hovers."""
+    guard = OscillationGuard(OscillationConfig())
+    moves = [get_command(c) for c in ("B1", "C1", "B1", "E", "E", "E", "E", "E", "E", "C1")]
+    fired = [guard.propose(State.ORIENTED_TOWARDS_DOOR, m) for m in moves]
+    assert fired[:-1] == [None] * 9 and fired[-1] == 3
+
+
 @pytest.mark.parametrize("name", ["cabin-person", "cabin-door"])
 def test_a_replayed_run_with_events_reaches_its_recorded_outcome(name: str, tmp_path: Path) -> None:
     result, _ = oracle_episode(name, "Go to the bathroom", tmp_path / "rec")

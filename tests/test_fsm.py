@@ -49,8 +49,10 @@ ADDED_NEXT = {
     State.SEARCH_OPEN_DOOR: (State.GOAL_UNREACHABLE,),
     State.GOAL_UNREACHABLE: (State.FINAL,),
 }
-# issue 24: hovering to wait for a person in the doorway, in the two door states
-ADDED_MOVES = {State.ORIENTED_TOWARDS_DOOR: ("E",), State.GO_THROUGH_DOOR: ("E",)}
+# issue 24 (EVFIX item 3): hovering in every asked state whose row does not list it (wait for a person, look again,
+# change state without moving)
+ADDED_MOVES = {State.RECOGNIZE_ROOM: ("E",), State.SEARCH_OBJECT: ("E",), State.ORIENTED_TOWARDS_DOOR: ("E",),
+               State.GO_THROUGH_DOOR: ("E",), State.POSITION_IN_CENTER: ("E",)}
 
 # Table 1's states in the paper's spelling, and the state each one is.
 TABLE_1 = {"Start": State.START, "Recognize room": State.RECOGNIZE_ROOM, "Search open door": State.SEARCH_OPEN_DOOR,
@@ -196,11 +198,22 @@ def test_hover_goes_with_a_final_state_and_a_next_state_move_is_explained() -> N
         return validate_decision(d, state)
 
     assert check(State.RECOGNIZE_ROOM, "E", State.STAY_ON_ROOM) is None
-    assert "not allowed" in check(State.RECOGNIZE_ROOM, "E", State.SEARCH_OPEN_DOOR)  # E only with a final state
     why = check(State.GO_THROUGH_DOOR, "A2", State.POSITION_IN_CENTER)
     assert "flown now, in 'Go Through Door'" in why and "apply from the next step" in why
     assert state_spec(State.RECOGNIZE_ROOM).answer_moves[-1] == "E"
-    assert "E" not in state_spec(State.SEARCH_OBJECT).answer_moves  # no final state reachable from there
+
+
+@pytest.mark.parametrize("profile", PROFILES)
+@pytest.mark.parametrize("state", ASKED_STATES, ids=[s.value for s in ASKED_STATES])
+def test_every_asked_state_may_hover_with_any_next_state(profile: str, state: State) -> None:
+    """EVFIX item 3: `E` in every asked state, towards every next state (a state change without moving)."""
+    from vlnpilot.core.decision import Decision, validate_decision
+
+    spec = state_spec(state, profile)
+    assert "E" in spec.moves
+    for nxt in spec.next_states:
+        d = Decision(room="bedroom", movement="E", state=nxt.value, description="", door_position="not_visible")
+        assert validate_decision(d, state, profile) is None, (state, nxt)
 
 
 def test_the_documented_command_table_is_the_command_table() -> None:

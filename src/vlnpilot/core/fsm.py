@@ -22,7 +22,11 @@ Additions for events in the scene (issue 24), marked `added_moves` / `added_next
 * Goal Unreachable is a final state: the pilot reports that no open door leads on to the goal (a door on the
   only route has closed). Search Open Door may move on to it; the judge counts it as an outcome of its own kind,
   `unreachable`, only when the goal is truly unreachable by the true map at that moment.
-* Oriented Towards Door and Go Through Door may hover (`E`): waiting for a person in the doorway to pass.
+* Every asked state may hover (`E`, `HOVER_ADDED`): to wait for a person to pass, to look again from the same
+  place, or to change state without moving (a state change otherwise forces a move under the old state's rules,
+  e.g. a rotation in Recognize Room that loses the door already in view). It costs a step. Where the paper's row
+  lists `E` already (Search Open Door, Reach Object, the final states) nothing is added, so `paper_moves` stays
+  Table 3 verbatim. The oscillation guard does not count hovers (`safety/guard.py`).
 """
 
 from __future__ import annotations
@@ -79,7 +83,7 @@ class StateSpec:
     added_next: tuple[State, ...] = ()
     final: bool = False
     description: str = ""  # Table 1's description
-    added_moves: tuple[str, ...] = ()  # moves beyond the paper's (issue 24: hover to wait for a person)
+    added_moves: tuple[str, ...] = ()  # moves beyond the paper's (issue 24: hover in every asked state)
 
     @property
     def moves(self) -> tuple[str, ...]:
@@ -106,17 +110,20 @@ class StateSpec:
 
 S = State
 FINAL_MOVE = "E"  # hovering: the move that goes with declaring a final state
+HOVER_ADDED = _moves("E")  # an addition (issue 24, EVFIX item 3): hover in every asked state (module doc)
 _PAPER_TABLE: tuple[StateSpec, ...] = (
     StateSpec(S.START, "Activate the system and take off.", _moves("E"), (S.RECOGNIZE_ROOM,),
               description="The initial state where the system is activated."),
     StateSpec(S.RECOGNIZE_ROOM, "Identify the current room.", _moves("A1", "B1-B3", "C1-C3"),
               (S.STAY_ON_ROOM, S.SEARCH_OBJECT, S.SEARCH_OPEN_DOOR), (S.RECOGNIZE_ROOM,),
-              description="The agent tries to determine the room in which it is currently located."),
+              description="The agent tries to determine the room in which it is currently located.",
+              added_moves=HOVER_ADDED),
     StateSpec(S.STAY_ON_ROOM, "Remain stationary in the target room.", _moves("E"), (S.FINAL,), final=True,
               description="When the target room is reached and no object is to be found."),
     StateSpec(S.SEARCH_OBJECT, "Locate and center the target object.", _moves("A1", "A2", "B1-B3", "C1-C3"),
               (S.SEARCH_OBJECT, S.REACH_OBJECT),
-              description="Once inside the target room, the system searches for the specific object of interest."),
+              description="Once inside the target room, the system searches for the specific object of interest.",
+              added_moves=HOVER_ADDED),
     StateSpec(S.REACH_OBJECT, "Approach and align with the object.", _moves("A1", "B1", "C1", "D1", "D2", "E"),
               (S.DESCRIBE_OBJECT, S.SEARCH_OBJECT, S.REACH_OBJECT),
               description="Guides the drone closer to the object."),
@@ -130,14 +137,15 @@ _PAPER_TABLE: tuple[StateSpec, ...] = (
     StateSpec(S.ORIENTED_TOWARDS_DOOR, "Align with the open door.", _moves("A1", "B1", "C1", "D1", "D2"),
               (S.GO_THROUGH_DOOR, S.SEARCH_OPEN_DOOR), (S.ORIENTED_TOWARDS_DOOR,),
               description="Aligns the drone to face the detected open door before crossing it.",
-              added_moves=_moves("E")),
+              added_moves=HOVER_ADDED),
     StateSpec(S.GO_THROUGH_DOOR, "Enter the next room through the door.", _moves("A1"),
               (S.POSITION_IN_CENTER, S.ORIENTED_TOWARDS_DOOR), (S.GO_THROUGH_DOOR,),
               description="Commands the drone to move through the recognized and oriented door.",
-              added_moves=_moves("E")),
+              added_moves=HOVER_ADDED),
     StateSpec(S.POSITION_IN_CENTER, "Move away from the door towards the middle of the new room.",
               _moves("A1", "A2", "B1-B3", "C1-C3"), (), (S.POSITION_IN_CENTER, S.RECOGNIZE_ROOM),
-              description="After crossing a door, the drone moves into the new room before recognising it."),
+              description="After crossing a door, the drone moves into the new room before recognising it.",
+              added_moves=HOVER_ADDED),
     StateSpec(S.GOAL_UNREACHABLE, "Report that the goal cannot be reached.", _moves("E"), (), (S.FINAL,),
               final=True, description="An addition (issue 24): every route to the goal room is closed (a door "
                                       "on the only route has shut); the drone hovers and reports it."),

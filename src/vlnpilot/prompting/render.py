@@ -112,10 +112,20 @@ def _movement_commands(spec: StateSpec) -> str:
     lines = ["Only return **ONE** movement command from the list below:"]
     for letter, commands in groups.items():
         lines += ["", f"### {letter}. {_kind_title(commands[0].kind)}:"]
-        lines += [f"- `{c.code}`: {c.description}" + (f", only together with the final state {finals}"
-                                                       if c.code not in spec.moves else "") for c in commands]
+        lines += [f"- `{c.code}`: {c.description}{_use_of(c, spec, finals)}" for c in commands]
     lines += ["", "The movement is flown now, in this state; the moves of the next state apply from the next step."]
     return "\n".join(lines)
+
+
+def _use_of(command: Command, spec: StateSpec, finals: str) -> str:
+    """What a move is for, where the list must say it: `E` beside a final state only, or `E` in a state that goes
+    on (the FSM's hover in every asked state, issue 24)."""
+    if command.code not in spec.moves:
+        return f", only together with the final state {finals}"
+    if command.kind is Kind.NONE and not spec.final:
+        return (": to wait for a person to pass, to look again from the same place, or to change state without "
+                "moving; it costs a step")
+    return ""
 
 
 _SECTION_RE = re.compile(r"^## OUTPUT STATE RULES[ \t]*$(.*?)(?=^## |^---[ \t]*$|\Z)", re.M | re.S)

@@ -38,6 +38,8 @@ class OscillationGuard:
         if self._state is not None and state is not self._state:
             self.committed = self.veto_pending = False
         self._state = state
+        if command.kind is Kind.NONE:  # a hover (waiting, looking again) is no step of an oscillation: not counted
+            return None
         axis = self._axis(command.kind)
         reversal = axis is not None and self._last_proposed.get(axis) is OPPOSITE[command.kind]
         if axis is not None:
