@@ -82,3 +82,15 @@ class FiredEvent:
 # The mover shield (safety/movers.py) keeps the drone's bounding circle this far (m, horizontally) from the
 # footprint of each kind of mover, at its predicted position over every command; the prompts state the same numbers.
 SHIELD_MARGIN_M = {"person": 0.5, "pet": 0.4}
+# How the shield reads a mover's height (a recorded safety setting, `SafetyConfig.mover_clearance`):
+# "column": every mover is a column from floor to ceiling (the rule the events trials were flown under);
+# "3d" (EVFIX item 1): a pet conflicts only if the drone's bottom could come within JUMP_MARGIN_M of its top (a dog
+# jumps); a person always conflicts. A recording without the setting was flown under "column".
+MOVER_CLEARANCES = ("column", "3d")
+JUMP_MARGIN_M = 0.3
+ALWAYS_CONFLICTS = frozenset({"person"})
+
+
+def reaches_height(mover: MoverState, bottom_z: float, clearance: str) -> bool:
+    """Whether `mover` could come within the vertical margin of a drone whose bottom is at `bottom_z` (m)."""
+    return clearance == "column" or mover.kind in ALWAYS_CONFLICTS or bottom_z < mover.height + JUMP_MARGIN_M

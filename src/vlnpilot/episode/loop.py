@@ -42,6 +42,14 @@ from vlnpilot.tasks.task import Task
 __all__ = ["run_episode"]
 
 
+def _as_recorded(pilot: Pilot, config: EpisodeConfig) -> EpisodeConfig:
+    """A replay flies under the mover shield's height rule its recording was flown with (and records it so)."""
+    rule = getattr(pilot, "recorded_mover_clearance", None)
+    if not isinstance(rule, str) or rule == config.safety.mover_clearance:
+        return config
+    return replace(config, safety=replace(config.safety, mover_clearance=rule))
+
+
 def _attach_ground_truth(env: Environment, pilot: BasePilot) -> GroundTruth | None:
     gt = ground_truth_of(env)  # only if the environment declares it (a real drone does not)
     if pilot.traits.privileged:
@@ -85,6 +93,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
     `judge_outcome` (the operator) rules. A stage judged a success hands over to the next one from Recognize
     Room; a stage judged a failure ends the mission. The budget is `config.max_steps` per stage, shared."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
+    config = _as_recorded(pilot, config)  # before the adapter: a wrapper (the bench's timer) delegates to the replay
     pilot = as_base_pilot(pilot)  # its traits and hooks, declared (a bare-protocol pilot is adapted once, here)
     safety = _preflight(env, pilot, config)  # on the ground: a real drone takes off in reset
     obs: Observation = env.reset(spawn, seed=config.seed)

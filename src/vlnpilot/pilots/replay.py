@@ -86,6 +86,13 @@ class ReplayPilot(BasePilot):
             raise ConfigError(f"{self.run_dir} was flown with other settings; replay it with {' '.join(differ)}")
 
     @property
+    def recorded_mover_clearance(self) -> str | None:
+        """The mover shield's height rule the recording was flown with (`SafetyConfig.mover_clearance`): the episode
+        flies the replay under it (episode/loop.py), so that the same answers meet the same shield. None for a set of
+        trials; "column" for a recording made before the setting existed."""
+        return recorded_mover_clearance(self.summary.get("config") or {}) if self.summary else None
+
+    @property
     def last_step(self) -> int:
         return max(self.steps, default=0)
 
@@ -204,6 +211,11 @@ def recorded_scenario(spec: str | None) -> dict[str, Any] | None:
     if not (run_dir / "summary.json").is_file():
         return None
     return load_run(run_dir)[0].get("scenario")
+
+
+def recorded_mover_clearance(config: dict[str, Any]) -> str:
+    """A recorded config's `safety.mover_clearance`; "column" if absent (every run before the 3-D rule)."""
+    return str((config.get("safety") or {}).get("mover_clearance", "column"))
 
 
 def _flown_with(config: dict[str, Any]) -> dict[str, Any]:

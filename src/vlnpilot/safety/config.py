@@ -8,6 +8,7 @@ from typing import Any
 from vlnpilot.core.commands import Command
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.fsm import State
+from vlnpilot.core.movers import MOVER_CLEARANCES
 
 DEFAULT_SHIELD = "geometry"  # the CLI's default in the simulator; the library default stays "off" (paper behaviour)
 
@@ -62,8 +63,13 @@ class SafetyConfig:
     assist_heading_deg: float = 45.0  # the assist acts only when heading within this of the door axis
     oscillation: OscillationConfig = field(default_factory=OscillationConfig)
     depth: DepthConfig = field(default_factory=DepthConfig)
+    # how the mover shield reads a mover's height (core.movers.MOVER_CLEARANCES): new runs record "3d"; a recording
+    # without it replays under "column", the rule it was flown with (pilots/replay.py)
+    mover_clearance: str = "3d"
 
     def __post_init__(self) -> None:
+        if self.mover_clearance not in MOVER_CLEARANCES:
+            raise ConfigError(f"mover_clearance {self.mover_clearance!r} is not one of {', '.join(MOVER_CLEARANCES)}")
         if not 0 <= self.margin_m <= 0.5:
             raise ConfigError(f"margin_m must be within 0..0.5 m, got {self.margin_m}")
         if self.substep_m <= 0 or self.substep_deg <= 0:

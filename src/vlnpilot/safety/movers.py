@@ -5,8 +5,11 @@ Prediction: each mover at constant velocity (`MoverState.at`) over the command's
 (`tello_spec.motion_duration_s`: the motion, then the settle, during which the drone holds its end pose). The drone
 moves in a straight line (a rotation does not move its centre), so between those instants both move linearly and
 the closest approach is exact (no sampling). Distances are horizontal, between the drone's bounding circle
-(`tello_spec.BOUNDING_RADIUS`) and the mover's footprint (`MoverState.radius`): a person is treated as a column
-from floor to ceiling, and a pet too (conservative; a pet's 0.35 m is far below the 1 m flight height).
+(`tello_spec.BOUNDING_RADIUS`) and the mover's footprint (`MoverState.radius`). Heights
+(`SafetyConfig.mover_clearance`, `core.movers.reaches_height`): under "3d" (new runs) a person is a column from
+floor to ceiling, and a pet conflicts only if the drone's bottom could come within `JUMP_MARGIN_M` (0.3 m) of its
+top (0.35 m: far below the 1 m flight height); under "column" (the rule the events trials were flown with,
+replayed as recorded) a pet is a column too.
 
 Already within the margin (a person walked up to the hovering drone), a command is allowed only if it keeps the
 drone at least as far from the mover as the hover it would be replaced by: the drone can always back away.
@@ -20,7 +23,7 @@ from collections.abc import Callable
 
 from vlnpilot.core import tello_spec
 from vlnpilot.core.commands import HOVER, Command, Kind
-from vlnpilot.core.movers import SHIELD_MARGIN_M, MoverState
+from vlnpilot.core.movers import SHIELD_MARGIN_M, MoverState, reaches_height
 from vlnpilot.core.records import Motion, Observation, Pose
 from vlnpilot.safety.shields import Shield
 
@@ -74,6 +77,7 @@ class MoverShield(Shield):
         self.inner, self._movers = inner, movers
         self.margins = dict(SHIELD_MARGIN_M if margins is None else margins)
         self.name = inner.name
+        self.clearance = inner.config.mover_clearance
 
     def reset(self, obs: Observation) -> None:
         self.inner.reset(obs)
@@ -86,7 +90,10 @@ class MoverShield(Shield):
         hover would), else None."""
         if motion.is_null:
             return None
+        bottom = min(pose.z, motion.apply(pose).z) - tello_spec.HEIGHT / 2  # no move of the table climbs or sinks
         for mover in self._movers():
+            if not reaches_height(mover, bottom, self.clearance):
+                continue  # a pet far below the drone: it does not block the way
             margin = self.margins[mover.kind]
             limit = min(margin, least_clearance(pose, motion, mover, hover=True))  # never worse than the hover
             gap = least_clearance(pose, motion, mover)
