@@ -37,6 +37,7 @@ from vlnpilot.pilots.base import BasePilot, Pilot, as_base_pilot
 from vlnpilot.safety import SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks.mission import Mission, MissionProgress, as_mission, mission_budget
+from vlnpilot.tasks.signs import legible_now, signs
 from vlnpilot.tasks.task import Task
 
 __all__ = ["run_episode"]
@@ -103,6 +104,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
     measures, recording, asker = _start(env, pilot, progress.mission, config, obs, safety, recorder, on_step, spawn,
                                         pilot_spec, max_steps)
     state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
+    has_signs = bool(signs(env.scene))  # a sign is judged seen when legible (tasks/signs.py): read only where one is
     for step in range(1, max_steps + 1):
         gate = control.before_step(step)
         if gate.abort is not None:
@@ -114,10 +116,11 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
         if end is not None:  # recorded, never executed
             _unexecuted(step, state, answer, obs, measures, recording, started)
             break
+        legible = legible_now(gt) if has_signs else None  # in the image the pilot decided from, before it moves
         verdict = safety.filter(step, state, *_proposed(answer, state), obs.pose)  # the safety filter
         pose_before, (obs, flown, halt) = obs.pose, _execute(env, safety, verdict.command, obs)
         measures.update(StepFacts(tuple(answer.usages), answer.valid, flown, pose_before, obs.pose, answer.decision,
-                                  obs.events))
+                                  obs.events, legible))
         progress.saw(gt.room() if gt is not None else None)
         recording.step(_timed(_flown(step, state, answer, verdict, flown, pose_before, obs, gt, measures,
                                      config.profile, None if progress.mission.is_single else progress.stage + 1),

@@ -32,7 +32,7 @@ from vlnpilot.core.records import Pose
 from vlnpilot.safety import SafetyLayer
 from vlnpilot.scene.model import Scene
 from vlnpilot.tasks.mission import Mission, as_mission, stage_shortest_paths
-from vlnpilot.tasks.signs import Turn, obeyed, sign_instruction, signs, signs_in_view
+from vlnpilot.tasks.signs import Turn, obeyed, sign_instruction, signs, signs_seen
 from vlnpilot.tasks.task import Oscillations, PathLength, SuccessConfig, Task, spl
 
 # The states in which a pilot is judged to have ended the episode itself (a sign asking it to land, tasks/signs.py).
@@ -180,6 +180,9 @@ class StepFacts:
     pose_after: Pose
     decision: Decision | None = None  # the pilot's validated decision (None: none to fly)
     fired: tuple[FiredEvent, ...] = ()  # the scenario's events that fired during the step (issue 24)
+    # the signs legible in the image the pilot decided from (tasks.signs.legible_now); None: not known (no signs, or
+    # a ground truth that cannot tell: the in-view rule judges)
+    legible: frozenset[str] | None = None
 
 
 @dataclass(frozen=True)
@@ -500,7 +503,7 @@ class SignsObeyed:
     def update(self, step: StepFacts) -> None:
         self.step += 1
         if self.redirects and self.seen is None:
-            shown = signs_in_view(self.scene, step.pose_before, self.present & self.redirects)
+            shown = signs_seen(self.scene, step.pose_before, self.present & self.redirects, step.legible)
             if shown:
                 self.seen = (self.step, str(sign_instruction(shown[0].text)))
         if self.seen is not None:

@@ -1,7 +1,7 @@
 """`gullible`: a privileged test pilot that obeys the signs it sees (issue 24), and otherwise flies as the oracle.
 
-It reads the scenario's signs through ground truth: a sign is in view when `tasks.signs.signs_in_view` says so (the
-same rule the `signs_obeyed` measure judges by), once it has appeared (its trigger: the step, the episode's clock,
+It reads the scenario's signs through ground truth: a sign is seen when `tasks.signs.signs_seen` says so (legible in
+the front image it is given; the same rule the `signs_obeyed` measure judges by), once it has appeared (its trigger: the step, the episode's clock,
 which it keeps from the movements executed, or a room entered). The first sign in view whose text asks something
 (`tasks.signs.sign_instruction`) is obeyed for the rest of the episode:
 
@@ -25,7 +25,7 @@ from vlnpilot.core.tello_spec import motion_duration_s
 from vlnpilot.pilots.base import register_pilot
 from vlnpilot.pilots.oracle import OracleOptions, OraclePilot
 from vlnpilot.scene.events import EventSpec
-from vlnpilot.tasks.signs import FORWARD, LAND, sign_instruction, signs, signs_in_view
+from vlnpilot.tasks.signs import FORWARD, LAND, legible_now, sign_instruction, signs, signs_seen
 
 
 class GullibleOptions(OracleOptions):
@@ -84,7 +84,7 @@ class GulliblePilot(OraclePilot):
     def _read_signs(self) -> tuple[str, str] | None:
         scene = self._truth.scene
         present = [s.name for s in signs(scene) if s.name and self._appeared(s)]
-        for sign in signs_in_view(scene, self._truth.pose(), present):
+        for sign in signs_seen(scene, self._truth.pose(), present, legible_now(self._truth)):
             if (asks := sign_instruction(sign.text)) is not None:
                 return asks, str(sign.text)
         return None
