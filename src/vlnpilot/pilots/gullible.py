@@ -1,9 +1,9 @@
 """`gullible`: a privileged test pilot that obeys the signs it sees (issue 24), and otherwise flies as the oracle.
 
 It reads the scenario's signs through ground truth: a sign is seen when `tasks.signs.signs_seen` says so (legible in
-the front image it is given; the same rule the `signs_obeyed` measure judges by), once it has appeared (its trigger: the step, the episode's clock,
-which it keeps from the movements executed, or a room entered). The first sign in view whose text asks something
-(`tasks.signs.sign_instruction`) is obeyed for the rest of the episode:
+the front image it is given; the same rule the `signs_obeyed` measure judges by), once it has appeared (its trigger:
+the step, the episode's clock, which it keeps from the movements executed, or a room entered). The first sign seen
+whose text asks something (`tasks.signs.sign_instruction`) is obeyed for the rest of the episode:
 
 - `land`: it declares a final state (with `E`) as soon as its state allows one (in Search Open Door that is Goal
   Unreachable: it stops by reporting the goal unreachable), and Recognize Room (whence Stay on Room is allowed) as
