@@ -3,8 +3,8 @@
     python scripts/trials_table.py [trials]            # markdown on stdout
     python scripts/trials_table.py --write [trials]    # the same tables into README.md (the summary),
                                                        # docs/results.md (per row), docs/pilot-memory.md,
-                                                       # docs/camera.md (Tello camera beside ideal) and
-                                                       # trials/README.md
+                                                       # docs/camera.md (Tello camera beside ideal),
+                                                       # docs/events-safety.md (events) and trials/README.md
 
 Reads only trials/SET/ROW/trial.json, so every figure in the README comes from the committed trials.
 """
@@ -18,7 +18,7 @@ from pathlib import Path
 
 from vlnpilot.bench.results import wilson_interval
 
-OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error")
+OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "unreachable")
 LABELS = {  # the sets in the order the tables list them (a set not named here comes last)
     "baseline": "before (baseline)", "after-paper": "after, paper context", "after-plus": "after, plus context",
     "houses-paper": "unseen houses, paper context", "houses-plus": "unseen houses, plus context",
@@ -43,6 +43,8 @@ LABELS = {  # the sets in the order the tables list them (a set not named here c
     "tello-stale-cabin": "Tello camera, first build (frames one move behind), cabin",
     "tello-stale-houses": "Tello camera, first build (frames one move behind), houses",
     "tello-stale-objects": "Tello camera, first build (frames one move behind), objects, fast profile",
+    "events-cabin": "events in the cabin: people, pets, doors that close, lights out, signs",
+    "events-houses": "events in unseen houses: people, pets, doors that close, lights out, signs",
 }
 
 
@@ -181,6 +183,39 @@ def camera_table(sets: dict[str, list[dict]]) -> str:
     return "\n".join(lines)
 
 
+def _mover_hovers(trial_dir: Path) -> int:
+    """Moves the pilot proposed that the mover shield replaced by a hover (an unsafe command proposed, not flown)."""
+    lines = (trial_dir / "episode.jsonl").read_text().splitlines()
+    return sum(str(i.get("reason", "")).startswith("mover:")
+               for line in lines for i in (json.loads(line).get("interventions") or []))
+
+
+def events_table(root: Path, sets: dict[str, list[dict]]) -> str:
+    """The episodes flown among events (issue 24), per set: outcomes (a goal rightly reported unreachable is a
+    success of its own kind), redirecting signs and whether one was obeyed, and what the mover shield did."""
+    lines = ["| events (real VLMs) | episodes | events flown | success | unreachable, rightly reported | "
+             "false success | steps exceeded | redirecting signs / obeyed | mover collisions | "
+             "moves stopped near a mover |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name in sorted((n for n in sets if n.startswith("events")), key=_order):
+        trials, kinds = sets[name], defaultdict(int)
+        redirect = obeyed = collisions = hovers = 0
+        for t in trials:
+            summary = json.loads((root / name / t["row"] / "summary.json").read_text())
+            for kind in t.get("events", []):
+                kinds[kind] += 1
+            signs = [e for e in summary["scenario"]["events"] if e["kind"] == "sign" and e.get("redirect")]
+            redirect += bool(signs)
+            obeyed += bool(summary["result"].get("signs_obeyed"))
+            collisions += summary["result"].get("mover_collisions") or 0
+            hovers += _mover_hovers(root / name / t["row"])
+        count = {o: sum(t["outcome"] == o for t in trials) for o in OUTCOMES}
+        flown = ", ".join(f"{k} {v}" for k, v in sorted(kinds.items()))
+        lines.append(f"| {LABELS.get(name, name)} | {len(trials)} | {flown} | {count['success']} | "
+                     f"{count['unreachable']} | {count['false_success']} | {count['max_steps']} | {redirect} / "
+                     f"{obeyed} | {collisions} | {hovers} |")
+    return "\n".join(lines)
+
+
 def trial_lines(sets: dict[str, list[dict]]) -> str:
     lines = ["| trials | row | outcome | steps | prompt version | images | flown |", "|---|---|---|---|---|---|---|"]
     for name in sorted(sets, key=_order):
@@ -210,6 +245,8 @@ def write_readmes(root: Path) -> None:
     memory.write_text(replace_table(memory.read_text(), memory_table(sets)))
     camera = root.parent / "docs" / "camera.md"
     camera.write_text(replace_table(camera.read_text(), camera_table(sets)))
+    events = root.parent / "docs" / "events-safety.md"
+    events.write_text(replace_table(events.read_text(), events_table(root, sets)))
     (root / "README.md").write_text(replace_table((root / "README.md").read_text(), trial_lines(sets)))
 
 
@@ -229,6 +266,8 @@ def main() -> None:
     print(mission_table(root, sets))
     print()
     print(camera_table(sets))
+    print()
+    print(events_table(root, sets))
     print()
     print(trial_lines(sets))
 

@@ -44,7 +44,8 @@ def test_the_tables_show_mover_and_sign_columns_only_where_there_were_any() -> N
     from vlnpilot.bench.tables import summary_columns
 
     def headers(**counts: int) -> set[str | None]:
-        base = {"stages": 1, "episodes": 1, "unreachable_reported": 0, "mover_episodes": 0, "sign_episodes": 0}
+        base = {"stages": 1, "episodes": 1, "unreachable_reported": 0, "mover_episodes": 0, "sign_episodes": 0,
+                "input_tokens": 0}
         return {c.md for c in summary_columns([SimpleNamespace(**{**base, **counts})])}
 
     assert not {"Mover collisions", "Signs obeyed"} & headers()  # the paper suite's table is as it was
