@@ -41,7 +41,9 @@ def test_the_reason_names_the_last_override_to_act() -> None:
             self.source = source
 
     hover, d1 = get_command("E"), get_command("D1")
-    assert override_reason("Recognize Room", "paper", hover, fallback=True) == "fallback"
+    # hover is allowed in every asked state (issue 24): the fallback's hover is no override any more
+    assert override_reason("Recognize Room", "paper", hover, fallback=True) is None
+    assert override_reason("Recognize Room", "paper", d1, fallback=True) == "fallback"
     assert override_reason("Go Through Door", "paper", d1, False, [Act("oscillation_guard"), Act("shield")]) \
         == "shield"
     assert override_reason("Go Through Door", "paper", get_command("A1"), False, [Act("door_assist")]) is None

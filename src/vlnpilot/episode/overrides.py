@@ -3,7 +3,8 @@
 The FSM table says which moves each state allows, and a model's answer is held to it. Three parts of the
 controller may still execute another command, because safety outranks the table: the hover fallback (E after
 the re-asks failed), the shield, the door-crossing assist and the oscillation guard. Every step record
-carries `override`: None when the executed command is allowed, else which of them put it there.
+carries `override`: None when the executed command is allowed, else which of them put it there. Since hover is
+allowed in every asked state (issue 24), the fallback's hover is an override only in recordings made before.
 """
 
 from __future__ import annotations
