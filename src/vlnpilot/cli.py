@@ -500,7 +500,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
     options["context"] = context or pinned_context or DEFAULT_CONTEXT
-    if _checked_detail(detail or "plain", "sim") != "plain":  # plain: benches before --detail hash alike
+    if detail is not None and _checked_detail(detail, "sim") != "plain":  # plain: benches before it hash alike
         options["detail"] = detail
     if estimate:
         from vlnpilot.bench.estimate import estimate_command

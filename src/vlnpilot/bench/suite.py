@@ -100,8 +100,8 @@ class SuiteRow:
         return Task(query=self.query, goal_room=self.goal_room, goal_target=self.goal_target)
 
     def canonical(self) -> dict[str, Any]:
-        out = {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
-               "goal_target": self.goal_target}
+        out: dict[str, Any] = {"id": self.id, "spawn": self.spawn, "query": self.query, "goal_room": self.goal_room,
+                               "goal_target": self.goal_target}
         out = {**out, "scene": self.scene} if self.scene else out
         if self.sensors:
             out = {**out, "sensors": self.sensors}

@@ -110,6 +110,14 @@ def _materials(scene: Scene) -> tuple[Material, ...]:
 Box = tuple[float, float, float, float, float, float]  # xmin, ymin, zmin, xmax, ymax, zmax
 
 
+def _volume(s: Solid) -> Box:
+    """`_aabb` of a solid with a volume (a surface or a placed part: never a plane)."""
+    box = _aabb(s)
+    if box is None:
+        raise ValueError(f"{s.name} is a plane: it has no volume")
+    return box
+
+
 def _aabb(s: Solid) -> Box | None:
     """A world box around a solid (None for the planes: the wall skins carry no volume)."""
     if s.shape == "plane":
@@ -138,7 +146,7 @@ def _skins(scene: Scene) -> list[tuple[Solid, tuple[float, float, float], tuple[
     out = []
     for s in scene.solids:
         if s.shape == "plane" and s.name.endswith("_skin") and s.xyaxes:
-            ax = tuple(s.xyaxes[:3])
+            ax = (float(s.xyaxes[0]), float(s.xyaxes[1]), float(s.xyaxes[2]))
             n = (ax[1], -ax[0], 0.0)  # x cross up, up = (0, 0, 1)
             out.append((s, ax, n))
     return out
@@ -310,7 +318,7 @@ def pictures(scene: Scene, rng: random.Random, placed: list[Solid]) -> list[Soli
                               0.0, 0.02, z0, z1, "detail_frame")
             clear = _wall_box("clearance", skin, ax, n, along - w / 2 - 0.05, along + w / 2 + 0.05, 0.0, 0.25,
                               z0 - 0.05, z1 + 0.05, "detail_frame")
-            if not _free(_aabb(clear), (*scene.solids, *placed, *out)):
+            if not _free(_volume(clear), (*scene.solids, *placed, *out)):
                 continue
             art = f"detail_art_{rng.randrange(4)}"
             out += [frame, _wall_box(f"{PREFIX}picture_{skin.name}_canvas", skin, ax, n, along - w / 2 + 0.03,
@@ -367,7 +375,7 @@ def clutter(scene: Scene, rng: random.Random, placed: list[Solid]) -> list[Solid
     out: list[Solid] = []
     ceiling = scene.flight_altitude - CLUTTER_CLEARANCE
     for top in _surfaces(scene):
-        x0, y0, zb, x1, y1, z = _aabb(top)
+        x0, y0, zb, x1, y1, z = _volume(top)
         kinds = [k for k, h in _HEIGHTS.items() if z + h <= ceiling]
         for i in range(rng.randint(1, 3) if kinds else 0):
             kind = rng.choice(kinds)

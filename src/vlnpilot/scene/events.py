@@ -62,7 +62,7 @@ class Trigger(BaseModel):
         return f"entering {self.enter}"
 
 
-AT_START = Trigger(step=0)
+AT_START = Trigger(step=0, time_s=None, enter=None)
 
 
 KIND_FIELDS = {
@@ -175,7 +175,7 @@ class Scenario(BaseModel):
             counts[e.kind] = counts.get(e.kind, 0) + 1
             named.append(e if e.name else e.model_copy(update={"name": f"{e.kind.replace('_', '-')}-{counts[e.kind]}"}))
         names = [e.name for e in named]
-        dupes = sorted({n for n in names if names.count(n) > 1})
+        dupes = sorted({str(n) for n in names if names.count(n) > 1})
         if dupes:
             raise ValueError(f"event names must be unique: {', '.join(str(d) for d in dupes)}")
         object.__setattr__(self, "events", tuple(named))

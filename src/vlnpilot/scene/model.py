@@ -272,7 +272,7 @@ class Scene:
 
         The solids, materials and lights are hashed too: the dataclass repr leaves them out (for readable
         logs), and a moved bed must change the fingerprint as much as a moved door."""
-        content = (self, self.solids, self.materials, self.lights)
+        content: tuple[object, ...] = (self, self.solids, self.materials, self.lights)
         if self.scenario is not None:  # the fingerprints of still scenes stay as they were
             content = (*content, json.dumps(self.scenario.to_dict(), sort_keys=True))  # what was set
         return hashlib.sha256(repr(content).encode("utf-8")).hexdigest()[:12]

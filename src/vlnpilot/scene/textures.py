@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import io
 from collections.abc import Callable
-from functools import cache
+from functools import cache, partial
 
 import numpy as np
 from PIL import Image
@@ -191,7 +191,7 @@ TEXTURES: dict[str, Callable[[], np.ndarray]] = {
     # rich detail (scene/detail.py): 8 boards per texture, so that a known texrepeat makes each 14 cm wide
     "floor_planks": lambda: wood_planks((150, 100, 60), planks=8, seed=21),
     "floor_planks_light": lambda: wood_planks((185, 140, 95), planks=8, seed=22),
-    **{f"art_{i}": (lambda i=i: art(30 + i)) for i in range(4)},
+    **{f"art_{i}": partial(art, 30 + i) for i in range(4)},
 }
 
 

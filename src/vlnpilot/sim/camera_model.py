@@ -238,8 +238,9 @@ class TelloCamera:
         img.save(buf, format="JPEG", quality=p.jpeg_quality)
         self.jpeg_bytes = buf.tell()  # what the frame cost the stream (docs/camera.md compares it with the bitrate)
         buf.seek(0)
-        out = Image.open(buf)
-        out.load()
+        decoded = Image.open(buf)
+        decoded.load()
+        out: Image.Image = decoded
         if out.size != (p.width, p.height):
             out = out.resize((p.width, p.height), Image.Resampling.NEAREST)
         return np.asarray(out)
@@ -296,4 +297,4 @@ def make_camera(name: str, lag_ms: float | None = None) -> TelloCamera | IdealCa
     key = check_camera(name)
     if key == "ideal":
         return IdealCamera()
-    return TelloCamera(TelloCameraParams(**({} if lag_ms is None else {"lag_ms": float(lag_ms)})))
+    return TelloCamera(TelloCameraParams() if lag_ms is None else TelloCameraParams(lag_ms=float(lag_ms)))

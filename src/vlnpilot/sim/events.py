@@ -140,7 +140,7 @@ def sign_layout(text: str) -> SignLayout:
         width = max(b[2] - b[0] for b in boxes)
         if width <= w - 60 and size * 1.2 * len(lines) <= h - 50:
             break
-    return SignLayout(size, tuple(lines), tuple(tuple(float(v) for v in b) for b in boxes))
+    return SignLayout(size, tuple(lines), tuple((float(b[0]), float(b[1]), float(b[2]), float(b[3])) for b in boxes))
 
 
 def sign_png(text: str, screen: bool) -> bytes:

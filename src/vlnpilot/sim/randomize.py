@@ -94,8 +94,8 @@ class Randomizer:
         m.light_diffuse[:] = np.clip(b["light_diffuse"] * light, 0, 1)
         m.vis.headlight.diffuse[:] = np.clip(b["headlight"] * light, 0, 1)
         m.vis.headlight.ambient[:] = np.clip(b["ambient"] * light, 0, 1)
-        tint = draw("material_brightness", (m.nmat, 1)) * draw("material_tint", (m.nmat, 3))
-        scale = draw("texture_scale", (m.nmat, 1))
+        tint = np.asarray(draw("material_brightness", (m.nmat, 1))) * np.asarray(draw("material_tint", (m.nmat, 3)))
+        scale = np.asarray(draw("texture_scale", (m.nmat, 1)))
         keep = np.array([i in self.skip_materials for i in range(m.nmat)], bool)
         tint[keep], scale[keep] = 1.0, 1.0
         m.mat_rgba[:, :3] = np.clip(b["mat_rgba"][:, :3] * tint, 0, 1)

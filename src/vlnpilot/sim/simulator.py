@@ -389,7 +389,7 @@ class Simulator:
         if hit is not None:
             raise ConfigError(f"spawn pose {pose.as_dict()} touches {hit[0]}")
         self._pose, self._step, self._last_move, self._seconds = pose, 0, None, 0.0
-        if self._randomizer is not None:
+        if self._randomizer is not None and self.config.randomize is not None:
             self.randomization = self._randomizer.apply(self.config.randomize)  # from the base values: repeatable
         exposure = self.randomization.exposure_gain if self.randomization is not None else 1.0
         self.camera.reset(seed, exposure, world=self.config.randomize)
