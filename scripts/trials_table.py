@@ -40,6 +40,7 @@ LABELS = {  # the sets in the order the tables list them (a set not named here c
     "tello-cabin": "cabin rows of after-plus, Tello camera model, randomised world",
     "tello-houses": "house routes of houses-plus, Tello camera model, randomised world",
     "tello-objects": "objects of objects20-none, Tello camera model, randomised world, fast profile",
+    "tello-stateless-objects": "objects of objects20-none, Tello camera, one fresh pilot per step (stateless)",
     "tello-stale-cabin": "Tello camera, first build (frames one move behind), cabin",
     "tello-stale-houses": "Tello camera, first build (frames one move behind), houses",
     "tello-stale-objects": "Tello camera, first build (frames one move behind), objects, fast profile",
