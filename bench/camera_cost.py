@@ -19,9 +19,8 @@ import time
 from pathlib import Path
 
 import numpy as np
-from machine import describe, publish  # bench/machine.py, beside this script
+from machine import describe, publish, time_alternately  # bench/machine.py, beside this script
 
-from vlnpilot.core.commands import get_command
 from vlnpilot.sim import SimConfig, Simulator  # selects the headless GL backend before mujoco loads
 from vlnpilot.sim.camera_model import FrameMotion, TelloCamera
 
@@ -40,30 +39,9 @@ def p90(values: list[float]) -> float:
 
 def measure(steps: int, rear: bool, scene: str = "cabin") -> dict[str, list[float]]:
     """The whole step of an ideal and a tello simulator flying the same commands, alternately."""
-    sims = {"ideal": Simulator(scene, SimConfig(rear_camera=rear)),
-            "tello": Simulator(scene, SimConfig(rear_camera=rear, camera="tello", randomize=1))}
-    times: dict[str, list[float]] = {key: [] for key in sims}
-    try:
-        for spawn in sims["ideal"].scene.spawns:
-            for sim in sims.values():
-                sim.reset(spawn.id, seed=1)
-                sim.step("E")  # warm-up: renderers, GL contexts and the lens table exist before we time anything
-                sim.reset(spawn.id, seed=1)
-            for i in range(steps):
-                cmd = get_command(SEQUENCE[i % len(SEQUENCE)])
-                collided = False
-                for key, sim in sims.items():
-                    t0 = time.perf_counter()
-                    obs = sim.step(cmd)
-                    times[key].append(time.perf_counter() - t0)
-                    collided = collided or obs.collided
-                if collided:  # start over from the spawn rather than grind against the obstacle
-                    for sim in sims.values():
-                        sim.reset(spawn.id, seed=1)
-    finally:
-        for sim in sims.values():
-            sim.close()
-    return times
+    return time_alternately({"ideal": Simulator(scene, SimConfig(rear_camera=rear)),
+                             "tello": Simulator(scene, SimConfig(rear_camera=rear, camera="tello", randomize=1))},
+                            steps, SEQUENCE, seed=1)
 
 
 def frame_alone(reps: int) -> dict[str, float]:
@@ -109,10 +87,7 @@ def main() -> int:
     lines += ["", f"One Tello frame from a 640x480 render, alone: {alone['still']:.1f} ms still, "
               f"{alone['streaked']:.1f} ms streaked by a turn; its JPEG is {alone['jpeg_kb']:.1f} kB."]
     text = "\n".join(lines) + "\n"
-    if args.smoke:
-        print(text)
-    else:
-        publish(text, OUT)
+    publish(text, OUT, smoke=args.smoke)
     return 0
 
 

@@ -89,10 +89,7 @@ def main(argv: list[str] | None = None) -> int:
         f"seeds in every condition), {suite.max_steps}-step limit, margin 5 cm. Wall time {wall:.0f} s on "
         f"{args.workers} worker processes, {cpu_model()} ({os.cpu_count()} cores visible), Python "
         f"{platform.python_version()}.", "", summarise(rows, shields), ""])
-    if args.smoke:
-        print(text)
-    else:
-        publish(text, args.out)
+    publish(text, args.out, smoke=args.smoke)
     return 0
 
 

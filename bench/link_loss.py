@@ -163,10 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     plan = [(rng.randint(1, MAX_KILL_STEP), rng.uniform(0.0, MAX_DELAY_S)) for _ in range(count)]
     runs = [fly(step, delay) for step, delay in plan]
     text = table(runs, args.seed)
-    if args.smoke:
-        print(text)
-    else:
-        publish(text, args.out)
+    publish(text, args.out, smoke=args.smoke)
     return 0 if all(r.ok for r in runs) else 1
 
 

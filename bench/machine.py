@@ -1,11 +1,15 @@
-"""What every bench script prints about the machine it measured on (imported by the scripts beside it)."""
+"""What every bench script prints about the machine it measured on, and how the step-cost scripts time
+simulators side by side (imported by the scripts beside it)."""
 
 from __future__ import annotations
 
 import os
 import platform
 import sys
+import time
+from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 
 def cpu_model() -> str:
@@ -30,9 +34,41 @@ def describe() -> str:
             f"load average {load_average()}")
 
 
-def publish(text: str, out: Path) -> None:
-    """Print a result table and keep it in `out` (bench/results/ by default), saying where."""
+def publish(text: str, out: Path, *, smoke: bool = False) -> None:
+    """Print a result table and keep it in `out` (bench/results/ by default), saying where; a `--smoke` run only
+    prints it (its few steps are no result to keep)."""
     print(text)
+    if smoke:
+        return
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     print(f"wrote {out}", file=sys.stderr)
+
+
+def time_alternately(sims: dict[str, Any], steps: int, sequence: Sequence[str],
+                     seed: int | None = None) -> dict[str, list[float]]:
+    """The whole step of each simulator, flying the same commands from each spawn alternately step by step (the
+    same poses, the same load on the machine): seconds per step, per key. Starts over from the spawn when one
+    collides rather than grind against the obstacle; closes the simulators."""
+    times: dict[str, list[float]] = {key: [] for key in sims}
+    try:
+        for spawn in next(iter(sims.values())).scene.spawns:
+            for sim in sims.values():
+                sim.reset(spawn.id, seed=seed)
+                sim.step("E")  # warm-up: renderers, GL contexts and lens tables exist before anything is timed
+                sim.reset(spawn.id, seed=seed)
+            for i in range(steps):
+                code = sequence[i % len(sequence)]
+                collided = False
+                for key, sim in sims.items():
+                    t0 = time.perf_counter()
+                    obs = sim.step(code)
+                    times[key].append(time.perf_counter() - t0)
+                    collided = collided or obs.collided
+                if collided:
+                    for sim in sims.values():
+                        sim.reset(spawn.id, seed=seed)
+    finally:
+        for sim in sims.values():
+            sim.close()
+    return times

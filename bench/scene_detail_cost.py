@@ -199,10 +199,7 @@ def main() -> None:
               "| scene | target | hidden |", "| --- | --- | ---: |",
               *(f"| {scene} | {target} | {share:.1%} |" for scene, target, share in hidden), ""]
     text = "\n".join(parts)
-    if args.smoke:
-        print(text)
-    else:
-        publish(text, OUT)
+    publish(text, OUT, smoke=args.smoke)
     if args.images:
         write_images(args.images)
 

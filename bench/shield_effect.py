@@ -125,10 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         summarise(rows, shields),
         "",
     ])
-    if args.smoke:
-        print(text)
-    else:
-        publish(text, args.out)
+    publish(text, args.out, smoke=args.smoke)
     return 0
 
 

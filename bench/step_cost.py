@@ -30,7 +30,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from machine import cpu_model, load_average  # bench/machine.py, beside this script
+from machine import cpu_model, load_average, time_alternately  # bench/machine.py, beside this script
 
 from vlnpilot.core.commands import get_command
 from vlnpilot.sim import SimConfig, Simulator, drone  # selects the headless GL backend before mujoco loads
@@ -97,30 +97,9 @@ def measure(steps: int, width: int, height: int, scene: str = "cabin") -> dict[s
 def measure_front_only(steps: int, width: int, height: int, scene: str = "cabin") -> dict[str, list[float]]:
     """The whole step of two simulators flying the same commands, one with both cameras and one with the front
     only, alternately step by step (the same poses, the same load on the machine)."""
-    sims = {"both": Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height)),
-            "front": Simulator(scene, SimConfig(width=width, height=height, rear_camera=False))}
-    times: dict[str, list[float]] = {key: [] for key in sims}
-    try:
-        for spawn in sims["both"].scene.spawns:
-            for sim in sims.values():
-                sim.reset(spawn)
-                sim.step("E")  # warm-up
-                sim.reset(spawn)
-            for i in range(steps):
-                cmd = get_command(SEQUENCE[i % len(SEQUENCE)])
-                collided = False
-                for key, sim in sims.items():
-                    t0 = time.perf_counter()
-                    obs = sim.step(cmd)
-                    times[key].append(time.perf_counter() - t0)
-                    collided = obs.collided
-                if collided:  # both collided alike: start over from the spawn
-                    for sim in sims.values():
-                        sim.reset(spawn)
-    finally:
-        for sim in sims.values():
-            sim.close()
-    return times
+    return time_alternately(
+        {"both": Simulator(scene, SimConfig(width=width, height=height, rear_width=width, rear_height=height)),
+         "front": Simulator(scene, SimConfig(width=width, height=height, rear_camera=False))}, steps, SEQUENCE)
 
 
 def renderer_build_ms(width: int, height: int, reps: int = 3) -> float:
