@@ -26,7 +26,7 @@ import yaml
 
 from vlnpilot.core.rundir import load_run
 from vlnpilot.pilots.replay import camera_flown_with
-from vlnpilot.scene import load_scene
+from vlnpilot.scene.events import scene_with_recorded
 
 PILOT_MEMORY = re.compile(r"conversation|none|history=[1-9]\d*(,images=\d+)?")
 
@@ -61,7 +61,7 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         "pilot_memory": memory,
         "started_at": summary["provenance"]["started_at"],
         "scene": scene_name,
-        "scene_fingerprint": flown_scene(scene_name, summary).fingerprint(),
+        "scene_fingerprint": scene_with_recorded(scene_name, summary.get("scenario")).fingerprint(),
         "prompt_hash": summary["provenance"]["prompt_hash"],
         "git_sha": summary["provenance"]["git_sha"],
         "context": (summary["config"].get("context") or {}).get("preset", "paper"),
@@ -80,15 +80,6 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
         shutil.copy2(account, dest / "account.md")
     write_suite(set_dir)
     return dest
-
-
-def flown_scene(name: str, summary: dict):
-    """The scene the run flew in: its recorded scenario of events on it, if it had one (docs/events.md)."""
-    from vlnpilot.scene.events import scenario_from_dict, with_scenario
-
-    scene = load_scene(name)
-    scenario = summary.get("scenario")
-    return with_scenario(scene, scenario_from_dict(scenario, "of the recording")) if scenario else scene
 
 
 def write_suite(set_dir: Path) -> Path:

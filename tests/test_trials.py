@@ -16,8 +16,7 @@ from vlnpilot.episode.config import EpisodeConfig
 from vlnpilot.episode.loop import run_episode
 from vlnpilot.pilots.base import make_pilot
 from vlnpilot.pilots.replay import camera_flown_with
-from vlnpilot.scene import load_scene
-from vlnpilot.scene.events import scenario_from_dict, with_scenario
+from vlnpilot.scene.events import scene_with_recorded
 from vlnpilot.sim import SimConfig, Simulator
 from vlnpilot.tasks.mission import Mission
 from vlnpilot.tasks.success import recorded_success
@@ -36,8 +35,7 @@ def simulators():
         visible; one flown among events (docs/events.md) replays among the same events, as recorded."""
         key = (scene, randomize, json.dumps(scenario, sort_keys=True))
         if key not in sims:
-            world = with_scenario(load_scene(scene), scenario_from_dict(scenario)) if scenario else scene
-            sims[key] = Simulator(world, SimConfig(render=False, randomize=randomize))
+            sims[key] = Simulator(scene_with_recorded(scene, scenario), SimConfig(render=False, randomize=randomize))
         return sims[key]
 
     yield simulator

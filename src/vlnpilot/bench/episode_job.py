@@ -77,8 +77,7 @@ class SimulatorCache:
     def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",  # noqa: PLR0913
             rear_camera: bool = True, camera: str = "ideal", randomize: int | None = None,
             detail: str = "plain", events: dict[str, Any] | None = None) -> Any:
-        from vlnpilot.scene import load_scene
-        from vlnpilot.scene.events import scenario_from_dict, with_scenario
+        from vlnpilot.scene.events import scene_with_recorded
         from vlnpilot.sim import SimConfig, Simulator
 
         sims = getattr(self._local, "sims", None)
@@ -90,8 +89,7 @@ class SimulatorCache:
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
-            world = with_scenario(load_scene(scene), scenario_from_dict(events)) if events else scene
-            sims[key] = Simulator(world, key[1])
+            sims[key] = Simulator(scene_with_recorded(scene, events, "of the suite row"), key[1])
             with self._lock:
                 self._all.append(sims[key])
         sims[key] = sims.pop(key)  # most recently used last

@@ -252,6 +252,15 @@ def with_scenario(scene: Scene, scenario: Scenario | None) -> Scene:
     return replace(scene, scenario=scenario)
 
 
+def scene_with_recorded(name: str, scenario: dict[str, Any] | None, source: str = "of the recording") -> Scene:
+    """The scene `name` with a scenario as a run or a suite row records it (`Scenario.to_dict`); the scene as
+    built without one: what a replay, a trial or a bench row flies in."""
+    from vlnpilot.scene import load_scene  # the scene registry imports this module's package
+
+    scene = load_scene(name)
+    return with_scenario(scene, scenario_from_dict(scenario, source)) if scenario else scene
+
+
 def validate_scenario(scenario: Scenario, scene: Scene) -> None:
     """Refuse, in one line, an event that names a room, door or wall the scene does not have, or a path that
     does not connect (consecutive rooms must share an open door)."""
