@@ -93,14 +93,15 @@ def test_house_env_builds_the_house_of_the_reset_seed() -> None:
 
 def test_the_simulator_cache_keeps_only_the_most_recent_houses_per_thread() -> None:
     from vlnpilot.bench.episode_job import SimulatorCache
+    from vlnpilot.sim import SimConfig
 
-    cache = SimulatorCache(per_thread=2)
+    cache, still = SimulatorCache(per_thread=2), SimConfig(render=False)
     try:
-        first = cache.get("house:0", False, 0.0, 0.0)
-        cache.get("house:1", False, 0.0, 0.0)
-        assert cache.get("house:0", False, 0.0, 0.0) is first  # a hit refreshes it
-        cache.get("house:2", False, 0.0, 0.0)  # evicts house:1, the least recently used
-        assert len(cache._all) == 2 and cache.get("house:0", False, 0.0, 0.0) is first
+        first = cache.get("house:0", still)
+        cache.get("house:1", still)
+        assert cache.get("house:0", still) is first  # a hit refreshes it
+        cache.get("house:2", still)  # evicts house:1, the least recently used
+        assert len(cache._all) == 2 and cache.get("house:0", still) is first
         assert {s.scene.name for s in cache._all} == {"house:0", "house:2"}
     finally:
         cache.close_thread()

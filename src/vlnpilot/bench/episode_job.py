@@ -74,18 +74,15 @@ class SimulatorCache:
         self._all: list[Any] = []
         self._lock = threading.Lock()
 
-    def get(self, scene: str, render: bool, jitter_m: float, jitter_deg: float, sensors: str = "none",  # noqa: PLR0913
-            rear_camera: bool = True, camera: str = "ideal", randomize: int | None = None,
-            detail: str = "plain", events: dict[str, Any] | None = None) -> Any:
+    def get(self, scene: str, config: Any, events: dict[str, Any] | None = None) -> Any:
+        """The simulator of `scene` with `config` (a `SimConfig`) and a row's scenario of `events`."""
         from vlnpilot.scene.events import scene_with_recorded
-        from vlnpilot.sim import SimConfig, Simulator
+        from vlnpilot.sim import Simulator
 
         sims = getattr(self._local, "sims", None)
         if sims is None:
             sims = self._local.sims = {}
-        key = (scene, SimConfig(render=render, spawn_jitter_m=jitter_m, spawn_jitter_deg=jitter_deg, sensors=sensors,
-                                rear_camera=rear_camera, camera=camera, randomize=randomize, detail=detail),
-               json.dumps(events, sort_keys=True) if events else None)
+        key = (scene, config, json.dumps(events, sort_keys=True) if events else None)
         if key not in sims:
             if len(sims) >= self.per_thread:  # a suite over many houses: keep the most recent few, not all
                 self._close(sims.pop(next(iter(sims))))
@@ -157,15 +154,17 @@ def execute_spec(spec: EpisodeSpec, simulators: SimulatorCache) -> dict[str, Any
     from vlnpilot.pilots.base import make_pilot
     from vlnpilot.pilots.ratelimit import parse_rate_limit, share_budgets
     from vlnpilot.prompting.render import prompt_hash
+    from vlnpilot.sim import SimConfig
     from vlnpilot.tasks.mission import Mission
     from vlnpilot.tasks.task import Task
 
     frames = spec.save_frames and spec.render
     # the chase camera is seen only in the recorded frames (the episode pages of the report): without them, not rendered
     config = EpisodeConfig(max_steps=spec.max_steps, profile=spec.profile, seed=spec.seed, **spec.episode_options)
-    sim = simulators.get(spec.scene, spec.render, spec.spawn_jitter_m, spec.spawn_jitter_deg, spec.sensors,
-                         rear_camera=frames, camera=spec.camera, randomize=spec.randomize, detail=config.detail,
-                         events=spec.events)
+    sim = simulators.get(spec.scene, SimConfig(render=spec.render, spawn_jitter_m=spec.spawn_jitter_m,
+                                               spawn_jitter_deg=spec.spawn_jitter_deg, sensors=spec.sensors,
+                                               rear_camera=frames, camera=spec.camera, randomize=spec.randomize,
+                                               detail=config.detail), spec.events)
     share_budgets(spec.rate_dir, parse_rate_limit(spec.rate_limit))  # before the pilot: it takes its budget
     pilot = TimedPilot(make_pilot(spec.pilot, **_pilot_options(spec)))
     run_dir = Path(spec.run_dir)
