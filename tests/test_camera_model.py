@@ -14,7 +14,15 @@ from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.records import Motion
 from vlnpilot.robots.session import check_camera_for
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.sim.camera_model import TelloCameraParams, frame_motion, lagged_fraction
+from vlnpilot.sim.camera_model import (
+    FrameMotion,
+    GLPixels,
+    IdealCamera,
+    TelloCamera,
+    TelloCameraParams,
+    frame_motion,
+    lagged_fraction,
+)
 from vlnpilot.sim.randomize import RANGES
 
 MOVES = ("A1", "B1", "C1", "A2")
@@ -65,6 +73,57 @@ def test_the_frame_shows_the_settled_pose_unless_the_lag_outlasts_the_controller
             assert after.pose != sim.scene.spawn("living_room").pose  # the drone moved either way
             seen[lag] = np.abs(after.front_rgb.astype(int) - before).mean()
     assert seen[1700] < 2 < seen[300], seen  # a lag within the wait shows the move; a longer one where it began
+
+
+def _as_read_back(rgb: np.ndarray) -> GLPixels:
+    rgba = np.full((*rgb.shape[:2], 4), 255, np.uint8)
+    rgba[..., :3] = rgb
+    return GLPixels(np.ascontiguousarray(rgba[::-1]))  # bottom row first, as glReadPixels delivers it
+
+
+@pytest.mark.parametrize("motion", [FrameMotion(), FrameMotion(blur_x_px=20), FrameMotion(blur_y_px=9, zoom=0.01),
+                                    FrameMotion(zoom=-0.02)], ids=["still", "turn", "climb-forward", "backward"])
+def test_the_gl_read_back_gives_the_frame_the_rgb_render_gives(motion: FrameMotion) -> None:
+    """The simulator hands the Tello model OpenGL's rows as they are (no flip, no repack); the frame is the very one
+    the top-down RGB render gives, pixel for pixel, and so every recorded frame still replays."""
+    with Simulator("cabin", SimConfig(rear_camera=False, width=320, height=240)) as sim:
+        rgb = sim.reset("living_room", seed=1).front_rgb
+    frames = []
+    for render in (rgb, _as_read_back(rgb)):
+        camera = TelloCamera()
+        camera.reset(3, bias=1.1, world=2)
+        frames.append(camera.frame(render, motion))
+    assert frames[0].shape == (720, 960, 3) and frames[0].flags.c_contiguous
+    assert np.array_equal(frames[0], frames[1])
+
+
+def test_the_simulator_reads_the_front_camera_back_for_the_tello_model_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    import vlnpilot.sim.simulator as simulator
+
+    reads: list[tuple[int, int, int]] = []
+    original = simulator.read_rgba
+
+    def counted(renderer, model):  # type: ignore[no-untyped-def]
+        pixels = original(renderer, model)
+        reads.append(pixels.rgba.shape if pixels is not None else None)
+        return pixels
+
+    monkeypatch.setattr(simulator, "read_rgba", counted)
+    _fly(SimConfig(rear_camera=False))
+    assert reads == []  # the ideal camera: MuJoCo's own RGB render
+    _fly(SimConfig(rear_camera=False, camera="tello"))
+    assert reads == [(480, 640, 4)] * (1 + len(MOVES))
+
+
+def test_the_ideal_camera_scales_a_randomised_worlds_render_by_its_exposure_bias() -> None:
+    rgb = np.arange(256, dtype=np.uint8).repeat(3).reshape(16, 16, 3)
+    camera = IdealCamera()
+    camera.reset(1, bias=1.25)
+    out = camera.frame(rgb)
+    assert np.array_equal(out, np.minimum(255, (rgb.astype(int) * 1.25 + 0.5).astype(int)))
+    assert np.array_equal(camera.frame(_as_read_back(rgb)), out)
+    camera.reset(1, bias=1.0)
+    assert camera.frame(rgb) is rgb
 
 
 def test_randomisation_stays_in_its_ranges_leaves_the_drone_alone_and_repeats_per_seed() -> None:

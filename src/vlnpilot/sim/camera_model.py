@@ -5,11 +5,13 @@ barrel distortion, motion blur along the last move, auto-exposure that adapts ov
 JPEG compression at the stream's bitrate. Frame lag is the simulator's part (it renders at the pose `lag_ms`
 before the move ended, `lagged_fraction`). Every parameter, with its source, is in docs/camera.md.
 
-Cost matters (bench/camera_cost.py: at most 1.3x the ideal step): the lens is one precomputed table of source
-pixels read with one numpy gather, the streak Pillow's box blur along the move, the exposure a lookup table, the
-noise (one of a few crops of a seeded tile) Pillow's `ImageChops.add_modulo`, the stream's size a nearest-neighbour
-resize, the compression Pillow's JPEG encoder and decoder. Deterministic: the same renders, seeds and moves give
-the same frames.
+Cost matters (bench/camera_cost.py: at most 1.3x the ideal step), and every pass over the image costs about the
+same, so there are few: the lens is one precomputed table of source pixels read with one numpy gather of 4-byte
+pixels (straight from the GL read-back, `GLPixels`, whose row order the table absorbs), which Pillow then shares
+without a copy; the streak is Pillow's box blur along the move, the exposure a lookup table, the noise (one of a few
+crops of a seeded tile) Pillow's `ImageChops.add_modulo`, the compression Pillow's JPEG encoder and decoder, the
+stream's size a nearest-neighbour resize, packed to RGB in one pass. Deterministic: the same renders, seeds and
+moves give the same frames, from an RGB render or from the GL read-back alike.
 """
 
 from __future__ import annotations
@@ -26,7 +28,6 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.records import Motion
 from vlnpilot.core.tello_spec import ASPECT, DIAGONAL_FOV_DEG
 
-_PIXEL = np.dtype([("r", "u1"), ("g", "u1"), ("b", "u1")])  # one RGB pixel, so that a gather moves 3 bytes at once
 CAMERAS = ("ideal", "tello")  # --camera: ideal (the render), tello (the Tello's stream)
 DEFAULT_CAMERA = "ideal"
 
@@ -129,10 +130,23 @@ def _undistort(xd: np.ndarray, yd: np.ndarray, k1: float, k2: float) -> tuple[np
     return xu, yu
 
 
-def distortion_table(params: TelloCameraParams, src_w: int, src_h: int) -> np.ndarray:
+@dataclass(frozen=True)
+class GLPixels:
+    """A render as OpenGL reads it back: HxWx4 uint8 RGBA, bottom row first (`sim/gl_readback.py`). The Tello model
+    reads it as is: its lens table flips the rows, and its 4-byte pixels gather and enter Pillow without a copy."""
+
+    rgba: np.ndarray
+
+    @property
+    def top_down_rgb(self) -> np.ndarray:
+        return np.ascontiguousarray(self.rgba[::-1, :, :3])
+
+
+def distortion_table(params: TelloCameraParams, src_w: int, src_h: int, bottom_up: bool = False) -> np.ndarray:
     """For each pixel of a `src_w` x `src_h` frame (row-major) with the Tello's lens, the index of the pinhole
-    render's pixel it shows (nearest; the JPEG that follows smooths the steps). The focal lengths keep the diagonal
-    field of view: the corner ray lands in the corner of both."""
+    render's pixel it shows (nearest; the JPEG that follows smooths the steps); `bottom_up`: of a render stored
+    bottom row first (`GLPixels`). The focal lengths keep the diagonal field of view: the corner ray lands in the
+    corner of both."""
     f_out = central_focal_px(params) * src_w / params.width
     half_diag_u = math.tan(math.radians(params.diagonal_fov_deg) / 2)  # normalised pinhole radius of a corner
     f_src = math.hypot(src_w, src_h) / 2 / half_diag_u
@@ -140,6 +154,8 @@ def distortion_table(params: TelloCameraParams, src_w: int, src_h: int) -> np.nd
     xu, yu = _undistort((gx - src_w / 2) / f_out, (gy - src_h / 2) / f_out, params.k1, params.k2)
     sx = np.clip(np.floor(xu * f_src + src_w / 2), 0, src_w - 1).astype(np.int32)
     sy = np.clip(np.floor(yu * f_src + src_h / 2), 0, src_h - 1).astype(np.int32)
+    if bottom_up:
+        sy = src_h - 1 - sy
     return (sy * src_w + sx).reshape(-1).astype(np.intp)  # numpy's own index type: the fastest gather
 
 
@@ -179,7 +195,7 @@ class TelloCamera:
         self.params = params or TelloCameraParams()
         if abs(ASPECT - self.params.width / self.params.height) > 1e-6:
             raise ConfigError("the Tello camera's frame must be 4:3")
-        self._table: dict[tuple[int, int], np.ndarray] = {}
+        self._table: dict[tuple[int, int, bool], np.ndarray] = {}
         self._noise: dict[tuple[int, int], list[Image.Image]] = {}
         self._rng = np.random.default_rng(0)
         self._gain: float | None = None
@@ -197,21 +213,31 @@ class TelloCamera:
         self._gain, self.bias = None, bias
 
     def _noise_image(self, w: int, h: int) -> Image.Image:
-        """The noise (modulo 256) at the render's size: one of `NOISE_FRAMES` crops of a seeded tile, drawn per
-        frame."""
+        """The noise (modulo 256, RGBX) at the render's size: one of `NOISE_FRAMES` crops of a seeded tile, drawn
+        per frame."""
         if (w, h) not in self._noise:
             tile = np.random.default_rng(25).normal(0.0, self.params.noise_sigma, (self.NOISE_TILE, self.NOISE_TILE, 3))
             tile = (np.clip(np.rint(tile), -self.NOISE_MAX, self.NOISE_MAX).astype(np.int16) % 256).astype(np.uint8)
             reps = (math.ceil(h / self.NOISE_TILE) + 1, math.ceil(w / self.NOISE_TILE) + 1, 1)
             big = np.tile(tile, reps)
             offsets = np.random.default_rng(26).integers(0, self.NOISE_TILE, (self.NOISE_FRAMES, 2))
-            self._noise[(w, h)] = [Image.fromarray(np.ascontiguousarray(big[y:y + h, x:x + w])) for x, y in offsets]
+            self._noise[(w, h)] = [Image.fromarray(np.ascontiguousarray(big[y:y + h, x:x + w])).convert("RGBX")
+                                   for x, y in offsets]
         return self._noise[(w, h)][int(self._rng.integers(self.NOISE_FRAMES))]
 
-    def _exposure(self, render: np.ndarray) -> float:
-        """This frame's gain: auto-exposure moves `ae_rate` of the way from the last gain to what this view wants."""
+    def _lens_table(self, w: int, h: int, bottom_up: bool) -> np.ndarray:
+        key = (w, h, bottom_up)
+        if key not in self._table:
+            self._table[key] = distortion_table(self.params, w, h, bottom_up)
+        return self._table[key]
+
+    def _exposure(self, render: np.ndarray, bottom_up: bool = False) -> float:
+        """This frame's gain: auto-exposure moves `ae_rate` of the way from the last gain to what this view wants,
+        metered on every 8th pixel of every 8th row from the top (from the bottom row first: the same rows; integers
+        summed in float64 are exact in any order)."""
         p = self.params
-        mean = float(render[::8, ::8].mean()) or 1.0
+        rows = render[(render.shape[0] - 1) % 8::8] if bottom_up else render[::8]
+        mean = float(rows[:, ::8, :3].mean()) or 1.0
         wanted = min(max(p.ae_target / mean, p.ae_range[0]), p.ae_range[1])
         if self._gain is None:
             self._gain = wanted  # settled at take-off
@@ -219,31 +245,50 @@ class TelloCamera:
             self._gain = math.exp(math.log(self._gain) + p.ae_rate * (math.log(wanted) - math.log(self._gain)))
         return self._gain * self.bias
 
-    def frame(self, render: np.ndarray, motion: FrameMotion = STILL) -> np.ndarray:
-        """The frame a Tello sends of `render` (HxWx3 uint8 pinhole image at the Tello's field of view): the lens
-        (at the render's size), the streak, the exposure, the noise, the stream's size and its compression."""
+    def frame(self, render: np.ndarray | GLPixels, motion: FrameMotion = STILL) -> np.ndarray:
+        """The frame a Tello sends of `render` (an HxWx3 uint8 pinhole image at the Tello's field of view, or the
+        same as `GLPixels`): the lens (at the render's size), the streak, the exposure, the noise, the compression
+        and the stream's size."""
         p = self.params
-        h, w = render.shape[:2]
-        if (w, h) not in self._table:
-            self._table[(w, h)] = distortion_table(p, w, h)
-        pixels = np.ascontiguousarray(render).reshape(-1, 3).view(_PIXEL).reshape(-1)
-        lens = np.take(pixels, self._table[(w, h)], mode="clip")  # one 3-byte gather per pixel (all in range)
-        img = Image.frombuffer("RGB", (w, h), lens.view(np.uint8), "raw", "RGB", 0, 1)
+        rgbx, bottom_up = _rgbx(render)
+        h, w = rgbx.shape[:2]
+        pixels = rgbx.view(np.uint32).reshape(-1)  # a gather moves whole 4-byte pixels
+        lens = np.take(pixels, self._lens_table(w, h, bottom_up), mode="clip")  # (all in range)
+        img = Image.frombuffer("RGBX", (w, h), lens, "raw", "RGBX", 0, 1)  # shares `lens`, no copy
         if not motion.still:
             img = _motion_blur(img, motion, w / p.width)
-        gain, k = self._exposure(render), self.NOISE_MAX
-        img = img.point(np.clip(np.rint(np.arange(256) * gain), k, 255 - k).astype(np.uint8).tolist() * 3)
+        gain, k = self._exposure(rgbx, bottom_up), self.NOISE_MAX
+        img = img.point(np.clip(np.rint(np.arange(256) * gain), k, 255 - k).astype(np.uint8).tolist() * 4)
         img = ImageChops.add_modulo(img, self._noise_image(w, h))  # never wraps: the exposure left k levels free
         buf = io.BytesIO()  # compressed at the render's size: the frame's detail is the render's (docs/camera.md)
         img.save(buf, format="JPEG", quality=p.jpeg_quality)
         self.jpeg_bytes = buf.tell()  # what the frame cost the stream (docs/camera.md compares it with the bitrate)
-        buf.seek(0)
-        decoded = Image.open(buf)
-        decoded.load()
-        out: Image.Image = decoded
+        out = Image.frombytes("RGB", (w, h), buf.getbuffer(), "jpeg", "RGB", "")  # the decoder alone, no file parsing
         if out.size != (p.width, p.height):
             out = out.resize((p.width, p.height), Image.Resampling.NEAREST)
-        return np.asarray(out)
+        return _packed_rgb(out)
+
+
+def _rgbx(render: np.ndarray | GLPixels) -> tuple[np.ndarray, bool]:
+    """`render` as HxWx4 uint8 pixels (the fourth byte unused) and whether its bottom row comes first."""
+    if isinstance(render, GLPixels):
+        return np.ascontiguousarray(render.rgba), True
+    h, w = render.shape[:2]
+    rgbx = np.empty((h, w, 4), np.uint8)
+    rgbx[..., :3] = render
+    rgbx[..., 3] = 255
+    return rgbx, False
+
+
+def _packed_rgb(img: Image.Image) -> np.ndarray:
+    """`img` as an HxWx3 uint8 array, packed in one pass (`np.asarray` packs it in 64 kB pieces, then joins them)."""
+    w, h = img.size
+    encoder = Image._getencoder(img.mode, "raw", ("RGB", 0, 1))
+    encoder.setimage(img.im, (0, 0, w, h))
+    _, status, data = encoder.encode(w * h * 3 + w * 4)  # room for every row at once: one call
+    if status != 1:  # the raw encoder ends with 1 when every row is out (RawEncode.c)
+        raise RuntimeError(f"packing a {w}x{h} frame ended with status {status}")
+    return np.frombuffer(data, np.uint8).reshape(h, w, 3)
 
 
 def _motion_blur(img: Image.Image, motion: FrameMotion, scale: float) -> Image.Image:
@@ -256,8 +301,9 @@ def _motion_blur(img: Image.Image, motion: FrameMotion, scale: float) -> Image.I
     if abs(motion.zoom) >= 1e-3:
         z = abs(motion.zoom)
         dx, dy = w * z / 2, h * z / 2
-        box = (dx, dy, w - dx, h - dy) if motion.zoom > 0 else (-dx, -dy, w + dx, h + dy)
-        img = Image.blend(img, img.resize((w, h), Image.Resampling.NEAREST, box=box), 0.5)
+        # the inner crop, for a backward move too: the exposure spans scales 1 to 1 - z instead of 1 to 1 + z, the same
+        # streak to the eye (and Pillow refuses a box outside the image)
+        img = Image.blend(img, img.resize((w, h), Image.Resampling.NEAREST, box=(dx, dy, w - dx, h - dy)), 0.5)
     return img
 
 
@@ -272,11 +318,12 @@ class IdealCamera:
     def reset(self, seed: int | None, bias: float = 1.0, world: int | None = None) -> None:
         self.bias = bias
 
-    def frame(self, render: np.ndarray, motion: FrameMotion = STILL) -> np.ndarray:
+    def frame(self, render: np.ndarray | GLPixels, motion: FrameMotion = STILL) -> np.ndarray:
+        rgb = render.top_down_rgb if isinstance(render, GLPixels) else render
         if abs(self.bias - 1) <= 1e-3:
-            return render
-        lut = np.array([min(255, int(i * self.bias + 0.5)) for i in range(256)], np.uint8)
-        return lut[render]
+            return rgb
+        lut = [min(255, int(i * self.bias + 0.5)) for i in range(256)] * 3
+        return _packed_rgb(Image.fromarray(np.ascontiguousarray(rgb)).point(lut))  # Pillow's table: 4x numpy's
 
 
 def camera_flown_with(camera: str | None, lag_ms: float | None, randomize: int | None) -> dict[str, object]:

@@ -29,6 +29,7 @@ from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
 from vlnpilot.sim import drone  # noqa: E402
 from vlnpilot.sim.camera_model import (  # noqa: E402
     STILL,
+    GLPixels,
     TelloCamera,
     check_camera,
     frame_motion,
@@ -42,6 +43,7 @@ from vlnpilot.sim.events import (  # noqa: E402
     EventWorld,
     sign_view,
 )
+from vlnpilot.sim.gl_readback import read_rgba  # noqa: E402
 from vlnpilot.sim.mirrors import mirror_geoms, reflect_in_view  # noqa: E402
 from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
@@ -495,10 +497,10 @@ class Simulator:
             if lagged != self._pose:
                 self._place_cameras(lagged)
                 try:
-                    return self.camera.frame(self._draw(drone.FRONT_CAMERA), motion)
+                    return self.camera.frame(self._front_render(), motion)
                 finally:
                     self._place_cameras(self._pose)  # back where the drone is (no collision pass: nothing moved)
-        return self.camera.frame(self._draw(drone.FRONT_CAMERA), motion)
+        return self.camera.frame(self._front_render(), motion)
 
     def _renderer(self, width: int, height: int) -> mujoco.Renderer:
         key = (width, height)
@@ -520,24 +522,39 @@ class Simulator:
     def _draw(self, camera: str, width: int | None = None, height: int | None = None, depth: bool = False
               ) -> np.ndarray:
         """`render` on a model already at the drone's pose (`_sync`)."""
-        cfg = self.config
-        if not cfg.render and not depth:
+        if not self.config.render and not depth:
             return no_image()
-        front = camera == drone.FRONT_CAMERA
-        w = width or (cfg.width if front else cfg.rear_width)
-        h = height or (cfg.height if front else cfg.rear_height)
-        r = self._renderer(w, h)
+        r = self._renderer(*self._size(camera, width, height))
         if depth:
             r.enable_depth_rendering()
         try:
-            r.update_scene(self.data, camera=camera, scene_option=None if depth else self._rgb_option)
-            if self._mirrors and not depth:
-                reflect_in_view(r.scene, self._mirrors, w / h, (self.model, self.data, self._body_id),
-                                keep=front)  # the chase view: no reflection pass
-            return r.render().copy()
+            self._update_view(r, camera, depth)
+            return r.render()  # a new array each call
         finally:
             if depth:
                 r.disable_depth_rendering()
+
+    def _front_render(self) -> np.ndarray | GLPixels:
+        """The front render as the camera model takes it: the Tello model reads OpenGL's RGBA rows as they are
+        (`GLPixels`: no flip, no repack), the ideal camera the RGB image."""
+        if not isinstance(self.camera, TelloCamera) or not self.config.render:
+            return self._draw(drone.FRONT_CAMERA)
+        r = self._renderer(*self._size(drone.FRONT_CAMERA))
+        self._update_view(r, drone.FRONT_CAMERA)
+        raw = read_rgba(r, self.model)
+        return raw if raw is not None else r.render()
+
+    def _size(self, camera: str, width: int | None = None, height: int | None = None) -> tuple[int, int]:
+        cfg = self.config
+        front = camera == drone.FRONT_CAMERA
+        return width or (cfg.width if front else cfg.rear_width), height or (cfg.height if front else cfg.rear_height)
+
+    def _update_view(self, r: mujoco.Renderer, camera: str, depth: bool = False) -> None:
+        """`r`'s scene as `camera` sees it at the current pose, with the mirrors' reflections (not in depth)."""
+        r.update_scene(self.data, camera=camera, scene_option=None if depth else self._rgb_option)
+        if self._mirrors and not depth:
+            reflect_in_view(r.scene, self._mirrors, r.width / r.height, (self.model, self.data, self._body_id),
+                            keep=camera == drone.FRONT_CAMERA)  # the chase view: no reflection pass
 
     def front_depth(self, width: int, height: int) -> np.ndarray:
         """The front camera's z-depth image (HxW float32, metres) at the current pose (`DepthSensing`)."""
