@@ -2,8 +2,9 @@
 
 The `tello` model turns a pinhole render into a 960x720 frame with the Tello's 82.6° diagonal field of view,
 barrel distortion, motion blur along the last move, auto-exposure that adapts over a step, sensor noise and
-JPEG compression at the stream's bitrate. Frame lag is the simulator's part (it renders at the pose `lag_ms`
-before the move ended, `lagged_fraction`). Every parameter, with its source, is in docs/camera.md.
+JPEG compression at the stream's bitrate. Frame lag is the simulator's part (it renders at the pose the frame
+shows, `lagged_fraction`: the settled one unless the lag outlasts the controller's wait). Every parameter, with its
+source, is in docs/camera.md.
 
 Cost matters (bench/camera_cost.py: at most 1.3x the ideal step), and every pass over the image costs about the
 same, so there are few: the lens is one precomputed table of source pixels read with one numpy gather of 4-byte
