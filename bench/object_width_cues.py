@@ -21,9 +21,10 @@ from pathlib import Path
 
 from machine import describe, publish  # bench/machine.py, beside this script
 
+from vlnpilot.core.cameras import CAMERAS
 from vlnpilot.scene.model import target_kind
 from vlnpilot.sim import SimConfig, Simulator
-from vlnpilot.sim.camera_model import CAMERAS, through_lens
+from vlnpilot.sim.camera_model import through_lens
 from vlnpilot.sim.ranging import beam
 from vlnpilot.sim.target_views import (
     VIEW_ANGLES,

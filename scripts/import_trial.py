@@ -27,6 +27,7 @@ import yaml
 from vlnpilot.core.rundir import load_run
 from vlnpilot.pilots.replay import camera_flown_with
 from vlnpilot.scene.events import scene_with_recorded
+from vlnpilot.tasks.mission import PARSER, Mission
 
 PILOT_MEMORY = re.compile(r"conversation|none|history=[1-9]\d*(,images=\d+)?")
 
@@ -85,13 +86,18 @@ def import_trial(run_dir: Path, set_dir: Path, row: str, *, flown_by: str, inter
 def write_suite(set_dir: Path) -> Path:
     """One suite row per trial of the set (one repetition each), with the set's common settings."""
     trials = sorted(p for p in set_dir.iterdir() if (p / "trial.json").is_file())
-    rows, limits, profiles, pins = [], set(), set(), set()
+    rows, limits, profiles, pins, cameras = [], set(), set(), set(), set()
     for path in trials:
         summary, _ = load_run(path)
         trial = json.loads((path / "trial.json").read_text())
         task = summary["task"]
         goal = {"room": task["goal_room"], **({"target": task["goal_target"]} if task["goal_target"] else {})}
-        rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], "goal": goal,
+        mission = Mission.from_dict(summary["mission"]) if summary.get("mission") else None
+        # a mission's row carries the plan it flew (its goal alone reads as a one-goal query), and who planned it: a
+        # pilot's plan is flown as written, not planned again by the parser, which may read the instruction otherwise
+        what = ({"plan": mission.plan(), **({"planned_by": mission.source} if mission.source != PARSER else {})}
+                if mission else {"goal": goal})
+        rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], **what,
                      "scene": trial["scene"]})
         sensors = range_sensor_of(summary)
         if sensors != "none":  # the drone it was flown with: a replay must carry the same sensor
@@ -99,15 +105,16 @@ def write_suite(set_dir: Path) -> Path:
         scenario = summary.get("scenario")
         if scenario:  # the events it met, as recorded (the row's scene is the scenario's)
             rows[-1]["events"] = {k: v for k, v in scenario.items() if k != "scene"}  # its name: the fingerprint
-        randomize = camera_flown_with(summary["config"]).get("randomize")
-        if randomize is not None:  # the world it was flown in: its camera height decides what is visible
-            rows[-1]["randomize"] = randomize
+        frames = camera_flown_with(summary["config"])
+        if frames.get("randomize") is not None:  # the world it was flown in: its camera height decides what is visible
+            rows[-1]["randomize"] = frames["randomize"]
+        cameras.add(frames.get("camera", "ideal"))
         limits.add(summary["config"]["max_steps"])
         profiles.add(summary["config"]["profile"])
         pins.add((trial.get("context") or "paper", trial.get("shield") or "off"))
-    if len(limits) != 1 or len(profiles) != 1 or len(pins) != 1:
-        raise SystemExit(f"{set_dir}: a set of trials shares one step limit, profile, context and shield; "
-                         f"found {sorted(limits)}, {sorted(profiles)}, {sorted(pins)}")
+    if len(limits) != 1 or len(profiles) != 1 or len(pins) != 1 or len(cameras) != 1:
+        raise SystemExit(f"{set_dir}: a set of trials shares one step limit, profile, context, shield and camera; "
+                         f"found {sorted(limits)}, {sorted(profiles)}, {sorted(pins)}, {sorted(cameras)}")
     context, shield = pins.pop()
     scene = rows[0]["scene"]
     for row in rows:  # a row names its scene only where it differs from the set's (houses)
@@ -115,7 +122,9 @@ def write_suite(set_dir: Path) -> Path:
             del row["scene"]
     suite = {"name": set_dir.name, "description": f"Replays the real-VLM trials of {set_dir.name}, one row each.",
              "scene": scene, "repetitions": 1, "max_steps": limits.pop(), "seed": 0,
-             "profile": profiles.pop(), "context": context, "shield": shield, "rows": rows}  # pinned: replays as flown
+             "profile": profiles.pop(), "context": context, "shield": shield,
+             **({"camera": camera} if (camera := cameras.pop()) != "ideal" else {}),  # the frames it saw
+             "rows": rows}  # pinned: replays as flown
     path = set_dir / "suite.yaml"
     path.write_text(yaml.safe_dump(suite, sort_keys=False, allow_unicode=True))
     return path

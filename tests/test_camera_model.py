@@ -261,3 +261,14 @@ def test_the_gym_environments_take_the_camera_and_a_randomised_world() -> None:
         assert env.sim.camera_settings()["randomize"]["seed"] == 2
     finally:
         env.close()
+
+
+def test_a_suite_pins_its_camera_and_an_unknown_one_is_refused_naming_the_valid() -> None:
+    from vlnpilot.bench.suite import SuiteError, suite_pins
+
+    rows = [{"spawn": "living_room", "query": "Go to the bathroom", "goal": "bathroom"}]
+    assert suite_from_dict({"name": "t", "camera": "tello", "rows": rows}).pins().camera == "tello"
+    assert suite_from_dict({"name": "t", "rows": rows}).camera is None
+    assert suite_pins(Path(__file__).resolve().parents[1] / "trials" / "tello-cabin" / "suite.yaml").camera == "tello"
+    with pytest.raises(SuiteError, match="unknown camera 'fisheye'; valid: ideal, tello"):
+        suite_from_dict({"name": "t", "camera": "fisheye", "rows": rows})

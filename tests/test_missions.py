@@ -206,3 +206,32 @@ def test_a_mission_suite_reads_back_from_its_manifest(name):
     again = suite_from_dict(suite.to_dict(), source="bench.json")
     assert [r.canonical() for r in again.rows] == [r.canonical() for r in suite.rows]
     assert any(r.mission is not None for r in again.rows)
+
+
+def test_a_row_planned_by_a_pilot_flies_its_plan_as_written_and_reads_back():
+    """A recorded trial's row carries the plan its pilot made (`planned_by`): the suite flies that plan, checked
+    against the map, not the parser's reading ("come back to the living room": the pilot's return, the parser's
+    room); the suite writes it back the same way."""
+    from vlnpilot.bench.suite import SuiteError, suite_from_dict
+
+    row = {"id": "back", "spawn": "living_room", "query": "Go to the bathroom, then come back to the living room",
+           "plan": {"stages": [{"room": "bathroom"}, {"return": "living_room"}]}, "planned_by": "stdin"}
+    suite = suite_from_dict({"name": "t", "scene": "cabin", "rows": [row]}, source="test")
+    mission = Mission.from_dict(suite.rows[0].mission)
+    assert [(s.kind, s.room) for s in mission.stages] == [("room", "bathroom"), ("return", "living_room")]
+    assert mission.source == "stdin"
+    assert suite_from_dict(suite.to_dict(), source="again").to_dict()["rows"][0]["planned_by"] == "stdin"
+    with pytest.raises(SuiteError, match="the plan says"):  # without planned_by the parser's reading must agree
+        suite_from_dict({"name": "t", "scene": "cabin", "rows": [{k: v for k, v in row.items() if k != "planned_by"}]},
+                        source="test")
+    bad = {**row, "plan": {"stages": [{"room": "attic"}]}}
+    with pytest.raises(SuiteError, match="attic"):
+        suite_from_dict({"name": "t", "scene": "cabin", "rows": [bad]}, source="test")
+
+
+def test_a_plan_reads_back_as_the_mission_it_was_written_from(sim):
+    mission = plan_mission("Don't go into the bathroom; find the mirror, then come back", sim.scene, "living_room")
+    again = Mission.from_plan(mission.query, mission.plan(), sim.scene, "parser")
+    assert again.plan() == mission.plan() and again.stages[0].room == "bedroom"
+    with pytest.raises(PlanError, match="stage"):
+        Mission.from_plan("q", {"stages": [{"fly": "up"}]}, sim.scene, "stdin")

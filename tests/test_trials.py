@@ -89,14 +89,45 @@ def test_replay_with_another_context_is_refused(simulators) -> None:
         replay(simulators("cabin"), trial_dir, context="paper")
 
 
-def test_a_set_replays_through_the_bench(tmp_path: Path) -> None:
-    """`vln-pilot bench --suite trials/SET/suite.yaml --pilots replay:trials/SET` reproduces the set."""
-    set_dir = TRIALS / "baseline"
+@pytest.mark.parametrize("name", ["baseline", "missions", "tello-cabin"])
+def test_a_set_replays_through_the_bench(name: str, tmp_path: Path) -> None:
+    """`vln-pilot bench --suite trials/SET/suite.yaml --pilots replay:trials/SET` reproduces the set, with no option:
+    the suite pins what the set was flown with (its context, shield and camera; a mission's plan as its pilot
+    planned it, even where the parser reads the instruction otherwise)."""
+    set_dir = TRIALS / name
     out = bench_command(suite=str(set_dir / "suite.yaml"), pilots=f"replay:{set_dir}", out=tmp_path / "bench",
-                        workers=1, progress=False, shield="geometry")
-    got = {r["row"]: r["result"]["outcome"] for r in map(json.loads, (out / "results.jsonl").read_text().splitlines())}
+                        workers=1, progress=False, frames=False)
+    records = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
     want = {p.name: json.loads((p / "trial.json").read_text())["outcome"] for p in set_dir.iterdir() if p.is_dir()}
-    assert got == want
+    assert {r["row"]: r["result"]["outcome"] for r in records} == want
+    flown = {json.loads((out / r["run_dir"] / "summary.json").read_text())["config"].get("camera", {}).get("model")
+             for r in records}
+    assert flown == ({"tello"} if name.startswith("tello") else {None})
+
+
+def test_a_set_is_not_replayed_with_other_frames_than_it_was_flown_with(tmp_path: Path) -> None:
+    """The same answers to other images are not the recording: refused in one line before anything runs, as
+    `vln-pilot run --pilot replay:` refuses it."""
+    for name, camera in (("tello-cabin", "ideal"), ("baseline", "tello")):
+        set_dir = TRIALS / name
+        with pytest.raises(ConfigError, match=f"was flown with other frames.*bench it with --camera "
+                                              f"{'tello' if camera == 'ideal' else 'ideal'}"):
+            bench_command(suite=str(set_dir / "suite.yaml"), pilots=f"replay:{set_dir}", out=tmp_path / name,
+                          workers=1, progress=False, camera=camera)
+        assert not (tmp_path / name).exists()
+
+
+def test_a_replay_is_judged_by_the_monitor_its_recording_was_judged_by(simulators) -> None:
+    """A trial judged before footprints (the point monitor) ends as it ended, flown with today's default config: the
+    replay pilot brings its recording's monitor, as it brings the mover shield's height rule."""
+    trial = TRIALS / "missions-houses" / "house10-hallway-desk-return"
+    summary, _ = load_run(trial)
+    assert "object_measured_to" not in summary["config"]["success"]
+    config = EpisodeConfig(max_steps=summary["config"]["max_steps"], profile="paper", context="plus", shield="geometry")
+    result = run_episode(simulators(summary["scene"]), make_pilot(f"replay:{trial}"),
+                         Mission.from_dict(summary["mission"]), config, spawn=summary["spawn"])
+    assert result.outcome == "false_success" == summary["result"]["outcome"]
+    assert "56° off the heading" in result.reason and "middle of its front" in result.reason  # the point monitor
 
 
 def test_readme_tables_come_from_the_trials() -> None:

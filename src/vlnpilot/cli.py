@@ -497,9 +497,9 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     from vlnpilot.safety import DEFAULT_SHIELD
 
     import_plugins(tuple(plugin or ()))  # first: a plugin's shield may be what the suite pins
-    pinned_shield, pinned_context = suite_pins(suite)  # the paper suite pins the paper's; else the run defaults
+    pins = suite_pins(suite)  # the paper suite pins the paper's; a set of trials what it was flown with
     options: dict[str, str] = {"overlay": overlay} if overlay else {}
-    options["context"] = context or pinned_context or DEFAULT_CONTEXT
+    options["context"] = context or pins.context or DEFAULT_CONTEXT
     if detail is not None and _checked_detail(detail, "sim") != "plain":  # plain: benches before it hash alike
         options["detail"] = detail
     if estimate:
@@ -511,7 +511,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     bench_dir = bench_command(suite=suite, pilots=pilots, reps=reps, max_steps=max_steps, workers=workers,
                               executor=executor, ray_address=ray_address, out=out, resume=resume, seed=seed,
                               profile=profile, base_url=check_base_url(base_url),
-                              shield=shield or pinned_shield or DEFAULT_SHIELD,
+                              shield=shield or pins.shield or DEFAULT_SHIELD,
                               episode_options=options, pilot_options=parse_option_pairs(pilot_option or ()),
                               plugins=tuple(plugin or ()), sensors=sensors, rate_limit=rate_limit,
                               frames=frames if frames is not None or resume else report, camera=camera,

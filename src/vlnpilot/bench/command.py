@@ -9,7 +9,8 @@ from typing import Any
 from vlnpilot.bench.executors import BenchError
 from vlnpilot.bench.manifest import MANIFEST, read_manifest
 from vlnpilot.bench.runner import BenchReport, BenchSettings, run_bench
-from vlnpilot.bench.suite import suite_pins
+from vlnpilot.bench.suite import SuitePins, suite_pins
+from vlnpilot.core.cameras import DEFAULT_CAMERA, check_camera
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.ranging import range_sensor
 from vlnpilot.pilots.ratelimit import parse_rate_limit
@@ -61,7 +62,8 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     elif resume and not (Path(out) / MANIFEST).is_file():
         raise BenchError(f"--resume --out {out}: there is no bench there to resume (no {MANIFEST}); give the "
                          "directory of an earlier bench, or drop --resume to start one")
-    options = _with_pins(suite, shield, dict(episode_options or {}))
+    pins = suite_pins(suite)
+    options = _with_pins(pins, shield, dict(episode_options or {}))
     check_detail(options.get("detail", "plain"))  # a bad value: one line, before anything runs
     if frames is None:  # a resumed bench goes on as it started (the choice is in its config hash)
         manifest = read_manifest(out) if resume else None
@@ -73,7 +75,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         episode_options=options,
         workers=workers, ray_address=ray_address, resume=resume, render=render, save_frames=render and frames,
         plugins=tuple(plugins), progress=progress, sensors=_checked_sensors(sensors),
-        rate_limit=f"{limit.rpm:g},{limit.tpm or 0:g}" if limit else None, **_imaging(more))
+        rate_limit=f"{limit.rpm:g},{limit.tpm or 0:g}" if limit else None, **_imaging(more, pins))
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:
@@ -114,22 +116,20 @@ def _more_settings(more: dict[str, Any]) -> tuple[bool | None, str | None]:
     return more.get("frames"), more.get("rate_limit")
 
 
-def _imaging(more: dict[str, Any]) -> dict[str, Any]:
-    """`camera` and `randomize` (docs/camera.md), checked: a bad camera is one line, before anything runs."""
-    from vlnpilot.sim.camera_model import check_camera
-
+def _imaging(more: dict[str, Any], pins: SuitePins) -> dict[str, Any]:
+    """`camera` (as given, else as the suite pins it, else ideal) and `randomize` (docs/camera.md), checked: a bad
+    camera is one line, before anything runs."""
     randomize = more.get("randomize")
     if randomize is not None and (isinstance(randomize, bool) or not isinstance(randomize, int)
                                   or not 0 <= randomize < 2**31):
         raise ConfigError(f"--randomize must be a seed in 0..{2**31 - 1}, got {randomize!r}")
-    return {"camera": check_camera(more.get("camera") or "ideal"), "randomize": randomize}
+    return {"camera": check_camera(more.get("camera") or pins.camera or DEFAULT_CAMERA), "randomize": randomize}
 
 
-def _with_pins(suite: str | Path, shield: str | None, options: dict[str, Any]) -> dict[str, Any]:
+def _with_pins(pins: SuitePins, shield: str | None, options: dict[str, Any]) -> dict[str, Any]:
     """The episode options with the shield and context the bench flies: as given, else as the suite pins them (else
     no shield and the paper's context). A paper context is left out, as before pins existed, so that earlier benches
     keep their config hash."""
-    pinned_shield, pinned_context = suite_pins(suite)
-    context = options.pop("context", None) or pinned_context or "paper"
-    return {"shield": (shield or pinned_shield or "off").lower(), **({"context": context} if context != "paper"
-                                                                   else {}), **options}
+    context = options.pop("context", None) or pins.context or "paper"
+    return {"shield": (shield or pins.shield or "off").lower(), **({"context": context} if context != "paper"
+                                                                 else {}), **options}

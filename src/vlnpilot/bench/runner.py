@@ -264,6 +264,7 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url, settings.pilot_options)
     executor_factory(settings.executor)  # a bad name is refused before anything runs
     _check_episode_options(suite, settings.episode_options)
+    _check_replayed_frames(plan(suite, pilots, settings, Path(".")))
     config = config_of(suite, pilots, settings)
     chash = config_hash(config)
     out = _bench_dir(settings, suite)
@@ -368,6 +369,22 @@ def _check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
         EpisodeConfig(max_steps=suite.max_steps, profile=suite.profile, **options)
     except TypeError as exc:
         raise ConfigError(f"bad episode option: {exc}") from None
+
+
+def _check_replayed_frames(specs: Sequence[EpisodeSpec]) -> None:
+    """A replay flies the frames its recording saw (the same answers to other images are not the recording, as
+    `vln-pilot run` says too): a recording flown with another camera or world is refused before anything runs."""
+    from vlnpilot.pilots.replay import frames_differ
+    from vlnpilot.sim.camera_model import camera_flown_with
+
+    for spec in {(s.pilot, s.row): s for s in specs if s.pilot.startswith("replay:")}.values():
+        differs = frames_differ(spec.pilot, camera_flown_with(spec.camera, None, spec.randomize), spec.row)
+        if differs is not None:
+            run_dir, then = differs
+            saw = ", ".join(f"{key} {value}" for key, value in then.items()) or "the ideal camera"
+            raise ConfigError(f"{run_dir} was flown with other frames ({saw}); bench it with --camera "
+                              f"{then.get('camera', 'ideal')}, or pin `camera:` in the suite (a set of trials pins "
+                              "what it was flown with)")
 
 
 def _prompt_hash(profile: str) -> str:

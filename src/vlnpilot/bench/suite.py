@@ -40,28 +40,29 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import yaml
 
 from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
+from vlnpilot.core.cameras import CAMERAS
 from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.fsm import PROFILES
 from vlnpilot.prompting.context import CONTEXT_PRESETS
 from vlnpilot.safety.shields import SHIELD_REGISTRY
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
-from vlnpilot.tasks.mission import Mission, PlanError, as_mission
+from vlnpilot.tasks.mission import PARSER, Mission, PlanError, as_mission, validate_mission
 from vlnpilot.tasks.mission_parser import plan_mission
 from vlnpilot.tasks.task import Task, parse_query
 
 _TOP_KEYS = ("name", "description", "scene", "repetitions", "max_steps", "seed", "profile", "context", "shield",
-             "spawn_jitter", "spawn_labels", "randomize", "rows")
+             "camera", "spawn_jitter", "spawn_labels", "randomize", "rows")
 # a row's own scene overrides the suite's (house suites); a row's `sensors` (none, tof, multiranger:
 # vlnpilot.core.ranging) the bench's --sensors; plan / refuse: what a mission suite expects; a row's `randomize`
 # (a domain randomisation seed, docs/camera.md) the suite's, and the suite's the bench's --randomize; a row's
 # `events`: its scenario (docs/events.md)
-_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "randomize", "plan", "refuse", "events")
+_ROW_KEYS = ("id", "spawn", "query", "goal", "scene", "sensors", "randomize", "plan", "planned_by", "refuse", "events")
 _ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
 
 
@@ -123,6 +124,14 @@ class RefusedRow:
     scene: str | None = None
 
 
+class SuitePins(NamedTuple):
+    """What a suite pins (None where it pins nothing): the bench flies it unless an option says otherwise."""
+
+    context: str | None
+    shield: str | None
+    camera: str | None
+
+
 @dataclass(frozen=True)
 class Suite:
     name: str
@@ -132,10 +141,12 @@ class Suite:
     max_steps: int = 50
     seed: int = 0
     profile: str = "paper"
-    # What the suite pins, so that its table means one thing (the paper suite: the paper's context and no shield);
-    # None: the bench's --context / --shield, or their defaults. An explicit option still overrides a pin.
+    # What the suite pins, so that its table means one thing (the paper suite: the paper's context and no shield; a
+    # set of trials: what it was flown with, its camera too); None: the bench's --context / --shield / --camera, or
+    # their defaults. An explicit option still overrides a pin.
     context: str | None = None
     shield: str | None = None
+    camera: str | None = None
     spawn_jitter_m: float = 0.0
     spawn_jitter_deg: float = 0.0
     spawn_labels: dict[str, str] = field(default_factory=dict)
@@ -170,7 +181,7 @@ class Suite:
         """The whole suite as plain data (YAML-able; `suite_from_dict` reads it back)."""
         return {"name": self.name, "description": self.description, "scene": self.scene,
                 "repetitions": self.repetitions, "max_steps": self.max_steps, "seed": self.seed,
-                "profile": self.profile, **{k: v for k, v in (("context", self.context), ("shield", self.shield)) if v},
+                "profile": self.profile, **{k: v for k, v in self.pins()._asdict().items() if v},
                 "spawn_jitter": {"m": self.spawn_jitter_m, "deg": self.spawn_jitter_deg},
                 "spawn_labels": dict(self.spawn_labels),
                 **({"randomize": self.randomize} if self.randomize is not None else {}),
@@ -178,6 +189,9 @@ class Suite:
 
     def dump(self) -> str:
         return yaml.safe_dump(self.to_dict(), sort_keys=False, allow_unicode=True)
+
+    def pins(self) -> SuitePins:
+        return SuitePins(context=self.context, shield=self.shield, camera=self.camera)
 
 
 def episode_seed(base: int, row_id: str, rep: int) -> int:
@@ -190,7 +204,8 @@ def episode_seed(base: int, row_id: str, rep: int) -> int:
 
 
 def _pin(data: dict[str, Any], key: str, valid: Iterable[str], errors: list[str]) -> str | None:
-    """A suite's pinned context or shield (None when it pins none); an unknown name is an error naming the valid."""
+    """A suite's pinned context, shield or camera (None when it pins none); an unknown name is an error naming the
+    valid."""
     value = data.get(key)
     if value is None:
         return None
@@ -203,18 +218,19 @@ def _pin(data: dict[str, Any], key: str, valid: Iterable[str], errors: list[str]
 def _row_dict(r: SuiteRow) -> dict[str, Any]:
     """A row as plain data that `suite_from_dict` reads back: a mission row by its plan (its goal alone would be
     read back as a one-goal query, which a mission's instruction is not)."""
-    what = ({"plan": Mission.from_dict(r.mission).plan()} if r.mission is not None else
-            {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}})
+    mission = Mission.from_dict(r.mission) if r.mission is not None else None
+    what = ({"plan": mission.plan(), **({"planned_by": mission.source} if mission.source != PARSER else {})}
+            if mission is not None else {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target
+                                                                             else {})}})
     return {"id": r.id, "spawn": r.spawn, "query": r.query, **what, **({"scene": r.scene} if r.scene else {}),
             **({"sensors": r.sensors} if r.sensors else {}),
             **({"randomize": r.randomize} if r.randomize is not None else {}),
             **({"events": {k: v for k, v in r.events.items() if k not in ("name", "scene")}} if r.events else {})}
 
 
-def suite_pins(suite: str | Path) -> tuple[str | None, str | None]:
-    """The shield and context a suite pins (None where it pins none)."""
-    loaded = load_suite(suite)
-    return loaded.shield, loaded.context
+def suite_pins(suite: str | Path) -> SuitePins:
+    """The context, shield and camera a suite pins (None where it pins none)."""
+    return load_suite(suite).pins()
 
 
 def load_suite(suite: str | Path) -> Suite:
@@ -280,6 +296,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
         errors.append(f"unknown profile {profile!r}; valid profiles: {', '.join(PROFILES)}")
     context = _pin(data, "context", CONTEXT_PRESETS, errors)
     shield = _pin(data, "shield", SHIELD_REGISTRY.names(), errors)
+    camera = _pin(data, "camera", CAMERAS, errors)
     randomize = _randomize_seed(data, "suite", errors)
     jitter = data.get("spawn_jitter") or {}
     jm = jd = 0.0
@@ -322,7 +339,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     if errors:
         raise SuiteError(f"suite {source} is invalid:\n  - " + "\n  - ".join(errors))
     return Suite(name=str(data.get("name") or default_name), rows=tuple(rows), scene=scene.name, repetitions=reps,
-                 max_steps=max_steps, seed=seed, profile=profile, context=context, shield=shield,
+                 max_steps=max_steps, seed=seed, profile=profile, context=context, shield=shield, camera=camera,
                  spawn_jitter_m=jm, spawn_jitter_deg=jd,
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
                  description=str(data.get("description") or ""), source=source, refused=tuple(refused),
@@ -439,8 +456,16 @@ def _row_sensors(raw: dict[str, Any], where: str, errors: list[str]) -> Any:
 
 def _planned(raw: dict[str, Any], where: str, scene: Scene, own_scene: bool,
              errors: list[str]) -> Mission | RefusedRow | None:
-    """The row's mission as the parser plans it at its spawn, checked against its `plan` or `refuse`."""
+    """The row's mission as the parser plans it at its spawn, checked against its `plan` or `refuse`; or, where the
+    row says who planned it (`planned_by`: a recorded trial's pilot), its `plan` as written, checked against the map."""
     spawn, query = raw["spawn"], raw["query"]
+    if raw.get("planned_by") is not None:
+        try:
+            return validate_mission(Mission.from_plan(query, raw.get("plan") or {}, scene, str(raw["planned_by"])),
+                                    scene, scene.spawn(spawn).room)
+        except VLNPilotError as exc:
+            errors.append(f"{where}: the plan {raw.get('plan')!r} by {raw['planned_by']}: {exc}")
+            return None
     if raw.get("goal") is not None and raw.get("plan") is None and raw.get("refuse") is None:
         try:  # a one-goal row (the paper's, the trials'): its query is read as before missions, the goal checks it
             return as_mission(parse_query(query, scene))

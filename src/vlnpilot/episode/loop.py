@@ -38,17 +38,22 @@ from vlnpilot.safety import SafetyLayer, SafetyVerdict, make_safety
 from vlnpilot.scene.model import Spawn
 from vlnpilot.tasks.mission import Mission, MissionProgress, as_mission, mission_budget
 from vlnpilot.tasks.signs import legible_now, signs
+from vlnpilot.tasks.success import SuccessConfig
 from vlnpilot.tasks.task import Task
 
 __all__ = ["run_episode"]
 
 
 def _as_recorded(pilot: Pilot, config: EpisodeConfig) -> EpisodeConfig:
-    """A replay flies under the mover shield's height rule its recording was flown with (and records it so)."""
+    """A replay flies under the rules its recording was flown with, the mover shield's height rule and the success
+    monitor (and records them so): the same answers meet the same shield and the same end is the same outcome."""
     rule = getattr(pilot, "recorded_mover_clearance", None)
-    if not isinstance(rule, str) or rule == config.safety.mover_clearance:
-        return config
-    return replace(config, safety=replace(config.safety, mover_clearance=rule))
+    if isinstance(rule, str) and rule != config.safety.mover_clearance:
+        config = replace(config, safety=replace(config.safety, mover_clearance=rule))
+    success = getattr(pilot, "recorded_success", None)
+    if isinstance(success, SuccessConfig) and success != config.success:
+        config = replace(config, success=success)
+    return config
 
 
 def _attach_ground_truth(env: Environment, pilot: BasePilot) -> GroundTruth | None:

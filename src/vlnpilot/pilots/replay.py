@@ -18,6 +18,7 @@ from vlnpilot.core.rundir import load_run, load_trial
 from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting.context import context_name
+from vlnpilot.tasks.success import SuccessConfig, recorded_success
 
 _MALFORMED = "malformed answer: "
 _INVALID_PREFIXES = ("movement ", "next state ")  # validate_decision's reasons
@@ -91,6 +92,13 @@ class ReplayPilot(BasePilot):
         flies the replay under it (episode/loop.py), so that the same answers meet the same shield. None for a set of
         trials; "column" for a recording made before the setting existed."""
         return recorded_mover_clearance(self.summary.get("config") or {}) if self.summary else None
+
+    @property
+    def recorded_success(self) -> SuccessConfig | None:
+        """The success monitor the recording was judged by (`config.success`; the point monitor before footprints):
+        the episode judges the replay by it too (episode/loop.py), so that the same end is the same outcome. None for
+        a set of trials."""
+        return recorded_success((self.summary.get("config") or {}).get("success")) if self.summary else None
 
     @property
     def last_step(self) -> int:
@@ -193,13 +201,24 @@ def camera_flown_with(config: dict[str, Any]) -> dict[str, Any]:
 def check_replay_camera(spec: str | None, now: dict[str, Any]) -> None:
     """Refuse (one line) to replay a `replay:RUN_DIR` recording with other frames than it was flown with
     (`now`: `camera_flown_with` of this run's camera): the same answers to other images are not the recording."""
-    run_dir = Path(spec.removeprefix("replay:")) if spec and spec.startswith("replay:") else None
-    if run_dir is None or not (run_dir / "summary.json").is_file():
-        return
-    then = camera_flown_with(load_run(run_dir)[0].get("config", {}))
-    if {k: str(v) for k, v in then.items()} != {k: str(v) for k, v in now.items()}:
+    differs = frames_differ(spec, now)
+    if differs is not None:
+        run_dir, then = differs
         flags = " ".join(f"--{key.replace('_', '-')} {value}" for key, value in then.items()) or "--camera ideal"
         raise ConfigError(f"{run_dir} was flown with other frames; replay it with {flags}")
+
+
+def frames_differ(spec: str | None, now: dict[str, Any], row: str | None = None) -> tuple[Path, dict[str, Any]] | None:
+    """The recording a `replay:` spec flies (in a set of trials, `row`'s) and how its frames were simulated
+    (`camera_flown_with`), where that differs from `now`; None where they agree or there is no recording."""
+    source = Path(spec.removeprefix("replay:")) if spec and spec.startswith("replay:") else None
+    run_dir = _recording(source, row) if source is not None and source.is_dir() else None
+    if run_dir is None or not (run_dir / "summary.json").is_file():
+        return None
+    then = camera_flown_with(load_run(run_dir)[0].get("config", {}))
+    if {k: str(v) for k, v in then.items()} == {k: str(v) for k, v in now.items()}:
+        return None
+    return run_dir, then
 
 
 def recorded_scenario(spec: str | None) -> dict[str, Any] | None:

@@ -62,7 +62,7 @@ class EmulatorConfig:
     detail: str = "plain"  # the scene detail its camera renders (scene/detail.py): plain | rich
 
     def __post_init__(self) -> None:
-        from vlnpilot.sim.camera_model import check_camera
+        from vlnpilot.core.cameras import check_camera
 
         object.__setattr__(self, "camera", check_camera(self.camera))
         try:

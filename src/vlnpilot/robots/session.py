@@ -133,7 +133,7 @@ def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None
 def check_camera_for(robot: str, camera: str | None, camera_lag_ms: float | None, randomize: int | None) -> None:
     """Refuse (one line) a simulated camera or world for a robot whose frames are real: a Tello's own stream is
     never post-processed (its emulator simulates the Tello's camera itself: `vln-pilot tello-emulator --camera`)."""
-    from vlnpilot.sim.camera_model import check_camera
+    from vlnpilot.core.cameras import check_camera
 
     key = str(robot).strip().lower()
     if camera is not None:

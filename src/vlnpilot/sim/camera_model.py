@@ -25,20 +25,10 @@ from dataclasses import dataclass
 import numpy as np
 from PIL import Image, ImageChops, ImageFilter
 
-from vlnpilot.core.errors import ConfigError, UnknownNameError
+from vlnpilot.core.cameras import DEFAULT_CAMERA, check_camera
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.records import Motion
 from vlnpilot.core.tello_spec import ASPECT, DIAGONAL_FOV_DEG
-
-CAMERAS = ("ideal", "tello")  # --camera: ideal (the render), tello (the Tello's stream)
-DEFAULT_CAMERA = "ideal"
-
-
-def check_camera(name: str) -> str:
-    """The camera model's name, or one line naming the valid ones."""
-    key = str(name).strip().lower()
-    if key not in CAMERAS:
-        raise UnknownNameError("camera", name, CAMERAS)
-    return key
 
 
 @dataclass(frozen=True)
@@ -341,7 +331,7 @@ def camera_flown_with(camera: str | None, lag_ms: float | None, randomize: int |
 
 
 def make_camera(name: str, lag_ms: float | None = None) -> TelloCamera | IdealCamera:
-    """The camera model called `name` (CAMERAS); `lag_ms` overrides the Tello's default frame lag."""
+    """The camera model called `name` (`core.cameras.CAMERAS`); `lag_ms` overrides the Tello's default frame lag."""
     key = check_camera(name)
     if key == "ideal":
         return IdealCamera()

@@ -16,6 +16,7 @@ gl.choose_backend()  # before MuJoCo's first import fixes its GL backend (only i
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
+from vlnpilot.core.cameras import check_camera  # noqa: E402
 from vlnpilot.core.commands import Command, get_command  # noqa: E402
 from vlnpilot.core.environment import Capabilities, GroundTruth  # noqa: E402
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
@@ -31,7 +32,6 @@ from vlnpilot.sim.camera_model import (  # noqa: E402
     STILL,
     GLPixels,
     TelloCamera,
-    check_camera,
     frame_motion,
     lagged_fraction,
     make_camera,
@@ -71,7 +71,7 @@ class SimConfig:
     visibility_height: int = 120
     sensors: str = "none"  # range sensors the drone carries (vlnpilot.core.ranging.SENSORS): none | tof | multiranger
     range_noise: bool = True  # the sensor's modelled noise on each reading (off: exact ray-cast distances)
-    camera: str = "ideal"  # what the front camera delivers (sim.camera_model.CAMERAS): ideal | tello
+    camera: str = "ideal"  # what the front camera delivers (core.cameras.CAMERAS): ideal | tello
     camera_lag_ms: float | None = None  # the tello camera's frame lag (None: its default, docs/camera.md)
     randomize: int | None = None  # domain randomisation seed (sim/randomize.py); None: the scene as built
     detail: str = DEFAULT_DETAIL  # scene detail the RGB cameras see (scene/detail.py): plain | rich

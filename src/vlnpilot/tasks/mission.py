@@ -34,6 +34,9 @@ class PlanError(QueryError):
     """An instruction that cannot be planned: the message names the part not understood and what the map offers."""
 
 
+PARSER = "parser"  # the source of a mission the rule-based parser planned (tasks/mission_parser.py)
+
+
 @dataclass(frozen=True)
 class Stage:
     """One goal of a mission. `room` is None only for a return not yet resolved against the start."""
@@ -63,7 +66,7 @@ class Mission:
     stages: tuple[Stage, ...]
     avoid: tuple[str, ...] = ()  # rooms the drone must never enter ("don't go to the bathroom")
     not_goals: tuple[str, ...] = ()  # rooms or objects the instruction names as not wanted ("not the bathroom")
-    source: str = "parser"  # parser | the pilot that planned it
+    source: str = PARSER  # parser | the pilot that planned it
     planning: tuple[dict[str, Any], ...] = field(default=(), compare=False)  # the planning calls (pilots/planning)
 
     @classmethod
@@ -74,7 +77,7 @@ class Mission:
     @property
     def recorded(self) -> bool:
         """Whether a run's header records the mission: several stages, or a plan that a pilot made."""
-        return not self.is_single or self.source != "parser"
+        return not self.is_single or self.source != PARSER
 
     @property
     def is_single(self) -> bool:
@@ -123,11 +126,31 @@ class Mission:
                            for s in self.stages], **({"planning": list(self.planning)} if self.planning else {})}
 
     @classmethod
+    def from_plan(cls, query: str, plan: Mapping[str, Any], scene: Scene, source: str) -> Mission:
+        """A plan as the suites write it (`plan()`: {room: X}, {object: T}, {return: X or true}, avoid, not) as a
+        Mission planned by `source`; not yet validated (`validate_mission`). An unreadable plan is a PlanError."""
+        stages = plan.get("stages") if isinstance(plan, Mapping) else None
+        if not isinstance(stages, list) or not stages:
+            raise PlanError(f"a plan is a mapping with a non-empty list of stages, got {plan!r}")
+        targets = {t.id: t.room for t in scene.targets}
+        out = []
+        for s in stages:
+            if not isinstance(s, Mapping) or len(s) != 1 or next(iter(s)) not in ("room", "object", "return"):
+                raise PlanError(f"a plan's stage is {{room: X}}, {{object: T}} or {{return: X}}, got {s!r}")
+            (kind, value), = s.items()
+            if kind == "object":
+                out.append(Stage("object", targets.get(str(value)), str(value)))
+            else:
+                out.append(Stage(kind, None if value is True else str(value)))
+        return cls(query=query, stages=tuple(out), avoid=tuple(plan.get("avoid") or ()),
+                   not_goals=tuple(plan.get("not") or ()), source=source)
+
+    @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Mission:
         stages = tuple(Stage(s["kind"], s.get("room"), s.get("target"), s.get("words", ""))
                        for s in data["stages"])
         return cls(query=data["query"], stages=stages, avoid=tuple(data.get("avoid") or ()),
-                   not_goals=tuple(data.get("not_goals") or ()), source=data.get("source", "parser"),
+                   not_goals=tuple(data.get("not_goals") or ()), source=data.get("source", PARSER),
                    planning=tuple(data.get("planning") or ()))
 
     def describe(self) -> str:
