@@ -141,3 +141,21 @@ def test_readme_tables_come_from_the_trials() -> None:
     assert table["summary_table"](sets) in readme
     assert table["row_table"](sets) in (TRIALS.parent / "docs" / "results.md").read_text()
     assert table["trial_lines"](sets) in (TRIALS / "README.md").read_text()
+
+
+def test_run_replays_a_mission_on_the_plan_its_pilot_made(monkeypatch: pytest.MonkeyPatch,
+                                                        capsys: pytest.CaptureFixture[str], tmp_path: Path) -> None:
+    """`vln-pilot run --pilot replay:TRIAL` flies the recorded pilot's plan (a return), not the parser's reading of the
+    same words (a room stage), and records no planning call it did not make."""
+    from cli_support import run_main
+
+    trial = TRIALS / "missions" / "cabin-living-bathroom-return"
+    summary, _ = load_run(trial)
+    code, out, _ = run_main(monkeypatch, capsys, "run", summary["task"]["query"], "--spawn", summary["spawn"],
+                            "--pilot", f"replay:{trial}", "--no-video", "--out", str(tmp_path / "run"))
+    again, _ = load_run(tmp_path / "run")
+    assert code == 0 and "plan (stdin)" in out and "return to the start" in out
+    assert [s["kind"] for s in again["mission"]["stages"]] == ["room", "return"]
+    assert "planning" not in again["mission"]
+    assert (again["result"]["outcome"], again["result"]["steps"]) == (summary["result"]["outcome"],
+                                                                      summary["result"]["steps"])

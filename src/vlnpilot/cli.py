@@ -173,7 +173,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.pilots.replay import recorded_scenario, recorded_settings
+    from vlnpilot.pilots.replay import recorded_mission, recorded_scenario, recorded_settings
     from vlnpilot.prompting.context import DEFAULT_CONTEXT
     from vlnpilot.robots.operator import ConsoleOperator, make_judge
     from vlnpilot.robots.session import check_robot, open_robot, robot_capabilities
@@ -204,7 +204,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     pilot_obj = make_pilot(pilot, **options)  # first: a pilot whose extra is missing says so
     _say_remote_url(pilot)
     check_capabilities(capabilities, robot, shield=shield, pilot=pilot_obj)  # before anything flies
-    task = _planned(query, sc, spawn_id, pilot_obj, planner)  # before take-off: a refusal flies nothing
+    task = _planned(query, sc, spawn_id, pilot_obj, planner, recorded_mission(pilot, query))  # a refusal flies nothing
     run_dir = claim_run_dir(out or default_run_dir("runs", f"{spawn_id}-{query}"), overwrite=overwrite)
 
     def show(rec: dict) -> None:
@@ -294,12 +294,17 @@ def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: s
     return live_control(run_dir, pilot, scene, host=host, port=port, say=lambda line: console.print(escape(line)))
 
 
-def _planned(query: str, scene: Any, spawn_id: str, pilot: Any, planner: str) -> Any:
-    """The instruction's mission (pilots/planning.py), said in a line when it is more than one goal."""
+def _planned(query: str, scene: Any, spawn_id: str, pilot: Any, planner: str, recorded: dict | None = None) -> Any:
+    """The instruction's mission (pilots/planning.py), said in a line when it is more than one goal; a replay's
+    `recorded` mission (a pilot's plan for this query) as recorded, checked against the map."""
     from vlnpilot.pilots.planning import plan_instruction
+    from vlnpilot.tasks.mission import Mission, validate_mission
 
-    mission, _ = plan_instruction(query, scene, scene.spawn(spawn_id).room, pilot, planner=planner,
-                                  say=lambda line: err_console.print(escape(line)))
+    if recorded is not None:
+        mission = validate_mission(Mission.from_dict(recorded), scene, scene.spawn(spawn_id).room)
+    else:
+        mission, _ = plan_instruction(query, scene, scene.spawn(spawn_id).room, pilot, planner=planner,
+                                      say=lambda line: err_console.print(escape(line)))
     if mission.recorded:
         console.print(f"plan ({escape(mission.source)}): {escape(mission.describe().replace(chr(10), '; '))}")
     return mission

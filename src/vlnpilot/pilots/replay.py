@@ -18,6 +18,7 @@ from vlnpilot.core.rundir import load_run, load_trial
 from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting.context import context_name
+from vlnpilot.tasks.mission import PARSER
 from vlnpilot.tasks.success import SuccessConfig, recorded_success
 
 _MALFORMED = "malformed answer: "
@@ -230,6 +231,21 @@ def recorded_scenario(spec: str | None) -> dict[str, Any] | None:
     if not (run_dir / "summary.json").is_file():
         return None
     return load_run(run_dir)[0].get("scenario")
+
+
+def recorded_mission(spec: str | None, query: str) -> dict[str, Any] | None:
+    """The mission a `replay:RUN_DIR` pilot's run flew, where a pilot planned it for this same `query` (its header's
+    `mission`), else None: `vln-pilot run` flies the replay on that plan, as the parser may read the instruction
+    otherwise (a replay answers no planning call)."""
+    if not spec or not spec.startswith("replay:"):
+        return None
+    run_dir = Path(spec.removeprefix("replay:"))
+    if not (run_dir / "summary.json").is_file():
+        return None
+    mission = load_run(run_dir)[0].get("mission")
+    if not mission or mission.get("query") != query or mission.get("source", PARSER) == PARSER:
+        return None
+    return {key: value for key, value in mission.items() if key != "planning"}  # the replay makes no planning call
 
 
 def recorded_mover_clearance(config: dict[str, Any]) -> str:
