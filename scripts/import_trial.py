@@ -27,7 +27,7 @@ import yaml
 from vlnpilot.core.rundir import load_run
 from vlnpilot.pilots.replay import camera_flown_with
 from vlnpilot.scene.events import scene_with_recorded
-from vlnpilot.tasks.mission import PARSER, Mission
+from vlnpilot.tasks.mission import Mission
 
 PILOT_MEMORY = re.compile(r"conversation|none|history=[1-9]\d*(,images=\d+)?")
 
@@ -92,11 +92,9 @@ def write_suite(set_dir: Path) -> Path:
         trial = json.loads((path / "trial.json").read_text())
         task = summary["task"]
         goal = {"room": task["goal_room"], **({"target": task["goal_target"]} if task["goal_target"] else {})}
-        mission = Mission.from_dict(summary["mission"]) if summary.get("mission") else None
         # a mission's row carries the plan it flew (its goal alone reads as a one-goal query), and who planned it: a
         # pilot's plan is flown as written, not planned again by the parser, which may read the instruction otherwise
-        what = ({"plan": mission.plan(), **({"planned_by": mission.source} if mission.source != PARSER else {})}
-                if mission else {"goal": goal})
+        what = Mission.from_dict(summary["mission"]).suite_row() if summary.get("mission") else {"goal": goal}
         rows.append({"id": path.name, "spawn": summary["spawn"], "query": task["query"], **what,
                      "scene": trial["scene"]})
         sensors = range_sensor_of(summary)

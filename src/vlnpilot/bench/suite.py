@@ -52,7 +52,7 @@ from vlnpilot.prompting.context import CONTEXT_PRESETS
 from vlnpilot.safety.shields import SHIELD_REGISTRY
 from vlnpilot.scene import SCENES, Scene, load_scene
 from vlnpilot.scene.houses import PREFIX as HOUSE_PREFIX
-from vlnpilot.tasks.mission import PARSER, Mission, PlanError, as_mission, validate_mission
+from vlnpilot.tasks.mission import Mission, PlanError, as_mission, validate_mission
 from vlnpilot.tasks.mission_parser import plan_mission
 from vlnpilot.tasks.task import Task, parse_query
 
@@ -218,10 +218,8 @@ def _pin(data: dict[str, Any], key: str, valid: Iterable[str], errors: list[str]
 def _row_dict(r: SuiteRow) -> dict[str, Any]:
     """A row as plain data that `suite_from_dict` reads back: a mission row by its plan (its goal alone would be
     read back as a one-goal query, which a mission's instruction is not)."""
-    mission = Mission.from_dict(r.mission) if r.mission is not None else None
-    what = ({"plan": mission.plan(), **({"planned_by": mission.source} if mission.source != PARSER else {})}
-            if mission is not None else {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target
-                                                                             else {})}})
+    what = (Mission.from_dict(r.mission).suite_row() if r.mission is not None else
+            {"goal": {"room": r.goal_room, **({"target": r.goal_target} if r.goal_target else {})}})
     return {"id": r.id, "spawn": r.spawn, "query": r.query, **what, **({"scene": r.scene} if r.scene else {}),
             **({"sensors": r.sensors} if r.sensors else {}),
             **({"randomize": r.randomize} if r.randomize is not None else {}),

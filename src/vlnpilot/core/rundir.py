@@ -199,14 +199,7 @@ def close_open_records(status: str = "interrupted") -> int:
 def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Read a run directory back: (summary, steps). A truncated last line (killed mid-write) is skipped."""
     run_dir = Path(run_dir)
-    if not (run_dir / SUMMARY).is_file():
-        raise ConfigError(f"{run_dir} is not a run directory: {SUMMARY} is missing")
-    try:
-        summary = json.loads((run_dir / SUMMARY).read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"{run_dir / SUMMARY} is not valid JSON ({exc}); restore it or fly the run again") from None
-    if not isinstance(summary, dict):
-        raise ConfigError(f"{run_dir / SUMMARY} holds a {type(summary).__name__}, not a run summary (a JSON object)")
+    summary = load_summary(run_dir)
     steps = []
     if (run_dir / EPISODE).is_file():
         for line in (run_dir / EPISODE).read_text().splitlines():
@@ -218,6 +211,20 @@ def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]
 
 
 TRIAL = "trial.json"  # beside a trial's summary.json: who flew it, when, how (see trials/README.md)
+
+
+def load_summary(run_dir: str | Path) -> dict[str, Any]:
+    """A run directory's summary alone (what it was flown with and how it ended), without its steps."""
+    run_dir = Path(run_dir)
+    if not (run_dir / SUMMARY).is_file():
+        raise ConfigError(f"{run_dir} is not a run directory: {SUMMARY} is missing")
+    try:
+        summary = json.loads((run_dir / SUMMARY).read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{run_dir / SUMMARY} is not valid JSON ({exc}); restore it or fly the run again") from None
+    if not isinstance(summary, dict):
+        raise ConfigError(f"{run_dir / SUMMARY} holds a {type(summary).__name__}, not a run summary (a JSON object)")
+    return summary
 
 
 def load_trial(run_dir: str | Path) -> dict[str, Any]:

@@ -14,7 +14,7 @@ from typing import Any
 
 from vlnpilot.core.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
 from vlnpilot.core.errors import ConfigError
-from vlnpilot.core.rundir import load_run, load_trial
+from vlnpilot.core.rundir import load_run, load_summary, load_trial
 from vlnpilot.pilots.base import BasePilot, PilotError, register_pilot
 from vlnpilot.pilots.options import PilotOptions
 from vlnpilot.prompting.context import context_name
@@ -175,12 +175,10 @@ def _recording(source: Path, row: str | None) -> Path | None:
 def recorded_settings(spec: str | None) -> dict[str, str]:
     """What a `replay:RUN_DIR` pilot's run was flown with (context, profile, shield, detail), so that `vln-pilot run`
     flies the replay as it was flown unless an option says otherwise; {} for another pilot or a set of trials."""
-    if not spec or not spec.startswith("replay:"):
+    header = _recorded_header(spec)
+    if header is None:
         return {}
-    run_dir = Path(spec.removeprefix("replay:"))
-    if not (run_dir / "summary.json").is_file():
-        return {}
-    config = load_run(run_dir)[0].get("config", {})
+    config = header.get("config", {})
     settings = {**_flown_with(config), **camera_flown_with(config), "detail": config.get("detail")}  # what it saw
     return {key: str(value) for key, value in settings.items() if value is not None and value != ""}
 
@@ -216,7 +214,7 @@ def frames_differ(spec: str | None, now: dict[str, Any], row: str | None = None)
     run_dir = _recording(source, row) if source is not None and source.is_dir() else None
     if run_dir is None or not (run_dir / "summary.json").is_file():
         return None
-    then = camera_flown_with(load_run(run_dir)[0].get("config", {}))
+    then = camera_flown_with(load_summary(run_dir).get("config", {}))
     if {k: str(v) for k, v in then.items()} == {k: str(v) for k, v in now.items()}:
         return None
     return run_dir, then
@@ -225,27 +223,26 @@ def frames_differ(spec: str | None, now: dict[str, Any], row: str | None = None)
 def recorded_scenario(spec: str | None) -> dict[str, Any] | None:
     """The scenario of events a `replay:RUN_DIR` pilot's run was flown with (its header's `scenario`), else None:
     `vln-pilot run` flies the replay in it, so that the same events fire at the same steps."""
-    if not spec or not spec.startswith("replay:"):
-        return None
-    run_dir = Path(spec.removeprefix("replay:"))
-    if not (run_dir / "summary.json").is_file():
-        return None
-    return load_run(run_dir)[0].get("scenario")
+    header = _recorded_header(spec)
+    return header.get("scenario") if header is not None else None
 
 
 def recorded_mission(spec: str | None, query: str) -> dict[str, Any] | None:
     """The mission a `replay:RUN_DIR` pilot's run flew, where a pilot planned it for this same `query` (its header's
     `mission`), else None: `vln-pilot run` flies the replay on that plan, as the parser may read the instruction
     otherwise (a replay answers no planning call)."""
-    if not spec or not spec.startswith("replay:"):
-        return None
-    run_dir = Path(spec.removeprefix("replay:"))
-    if not (run_dir / "summary.json").is_file():
-        return None
-    mission = load_run(run_dir)[0].get("mission")
+    mission = (_recorded_header(spec) or {}).get("mission")
     if not mission or mission.get("query") != query or mission.get("source", PARSER) == PARSER:
         return None
     return {key: value for key, value in mission.items() if key != "planning"}  # the replay makes no planning call
+
+
+def _recorded_header(spec: str | None) -> dict[str, Any] | None:
+    """The summary of the one run a `replay:RUN_DIR` spec flies; None for another pilot or a set of trials."""
+    if not spec or not spec.startswith("replay:"):
+        return None
+    run_dir = Path(spec.removeprefix("replay:"))
+    return load_summary(run_dir) if (run_dir / "summary.json").is_file() else None
 
 
 def recorded_mover_clearance(config: dict[str, Any]) -> str:

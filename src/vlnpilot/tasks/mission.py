@@ -118,6 +118,11 @@ class Mission:
             out["not"] = list(self.not_goals)
         return out
 
+    def suite_row(self) -> dict[str, Any]:
+        """What a suite row writes of this mission: its plan, and who planned it where the parser did not (a suite flies
+        a pilot's plan as written, bench/suite.py)."""
+        return {"plan": self.plan(), **({"planned_by": self.source} if self.source != PARSER else {})}
+
     def to_dict(self) -> dict[str, Any]:
         """As recorded in a run's header and sent to pilots: the stages with their rooms and targets."""
         return {"query": self.query, "source": self.source, "avoid": list(self.avoid),
