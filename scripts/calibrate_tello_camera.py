@@ -23,10 +23,17 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
-from vlnpilot.sim.camera_model import TelloCameraParams, central_focal_px
+from vlnpilot.sim.camera_model import TelloCamera, TelloCameraParams, _undistort, central_focal_px
 
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 MIN_VIEWS = 6  # fewer views leave the radial terms poorly determined
+# Synthetic views of a 10 x 7 board of 5 cm squares (9 x 6 inner corners), to check the tool and the model:
+# (board centre in the camera frame, m: x right, y down, z ahead; yaw, pitch in degrees): the centre, the frame's
+# four corners, tilts, and the edges
+SYNTHETIC_POSES = [((0, 0, 0.8), 0, 0), ((-0.25, -0.17, 0.8), 20, -15), ((0.25, -0.17, 0.8), -20, -15),
+                   ((-0.25, 0.17, 0.8), 20, 15), ((0.25, 0.17, 0.8), -20, 15), ((0, 0, 0.6), 30, 0),
+                   ((0, 0, 0.6), -30, 0), ((0, 0, 0.6), 0, 30), ((0, 0, 0.6), 0, -30), ((-0.3, 0, 0.85), 10, 5),
+                   ((0.3, 0, 0.85), -10, -5), ((0, 0.2, 0.85), 5, 10)]
 
 
 class CalibrationError(ValueError):
@@ -111,6 +118,47 @@ def calibrate(images: list[np.ndarray], pattern: tuple[int, int]) -> Calibration
     return Calibration(width=width, height=height, fx=float(matrix[0, 0]), fy=float(matrix[1, 1]),
                        cx=float(matrix[0, 2]), cy=float(matrix[1, 2]), k1=float(dist.ravel()[0]),
                        k2=float(dist.ravel()[1]), rms_px=float(rms), views=len(image_points))
+
+
+def synthetic_views(params: TelloCameraParams, through_model: bool, poses: list = SYNTHETIC_POSES) -> list[np.ndarray]:
+    """Chessboard frames with a known lens: made with the lens equations directly (`through_model` False: what a
+    calibration must give back exactly), or through the `tello` camera model itself (a pinhole render at the Tello's
+    field of view, then the lens table, JPEG and the resize: what the model's frames show of the lens it declares)."""
+    if not through_model:
+        f = central_focal_px(params)
+        u, v = np.meshgrid(np.arange(params.width) + 0.5, np.arange(params.height) + 0.5)
+        xu, yu = _undistort((u - params.width / 2) / f, (v - params.height / 2) / f, params.k1, params.k2)
+        return [_board(xu, yu, *pose) for pose in poses]
+    w, h = 640, 480  # the simulator's render, twice as fine then averaged: smooth edges
+    f = math.hypot(2 * w, 2 * h) / 2 / math.tan(math.radians(params.diagonal_fov_deg) / 2)
+    u, v = np.meshgrid(np.arange(2 * w) + 0.5, np.arange(2 * h) + 0.5)
+    camera = TelloCamera(params)
+    camera.reset(1)
+    views = []
+    for pose in poses:
+        grey = np.asarray(Image.fromarray(_board((u - w) / f, (v - h) / f, *pose)).reduce(2))
+        views.append(camera.frame(np.repeat(grey[..., None], 3, axis=2)))
+    return views
+
+
+def _board(xu: np.ndarray, yu: np.ndarray, center: tuple, yaw: float, pitch: float, square: float = 0.05,
+           cols: int = 10, rows: int = 7) -> np.ndarray:
+    """What the rays (xu, yu, 1) of a pinhole see of a chessboard: grey levels, with a white margin of one square."""
+    cy, sy, cp, sp = (math.cos(math.radians(yaw)), math.sin(math.radians(yaw)), math.cos(math.radians(pitch)),
+                      math.sin(math.radians(pitch)))
+    rot = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]]) @ np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
+    e1, e2 = rot[:, 0], rot[:, 1]
+    normal = np.cross(e1, e2)
+    origin = np.asarray(center, float) - cols / 2 * square * e1 - rows / 2 * square * e2
+    t = (normal @ origin) / (normal[0] * xu + normal[1] * yu + normal[2])
+    px, py, pz = t * xu - origin[0], t * yu - origin[1], t - origin[2]
+    a = (px * e1[0] + py * e1[1] + pz * e1[2]) / square
+    b = (px * e2[0] + py * e2[1] + pz * e2[2]) / square
+    img = np.full(a.shape, 110, np.uint8)
+    img[(a >= -1) & (a < cols + 1) & (b >= -1) & (b < rows + 1)] = 235
+    dark = (np.floor(a).astype(int) + np.floor(b).astype(int)) % 2 == 0
+    img[(a >= 0) & (a < cols) & (b >= 0) & (b < rows) & dark] = 20
+    return img
 
 
 def report(cal: Calibration, params: TelloCameraParams) -> str:
