@@ -92,6 +92,14 @@ def frames_in(directory: Path) -> list[Path]:
     return frames
 
 
+def _grey(path: Path) -> np.ndarray:
+    try:
+        with Image.open(path) as img:
+            return np.asarray(img.convert("L"))
+    except OSError as exc:
+        raise CalibrationError(f"{path} is not a readable image ({exc})") from None
+
+
 def calibrate(images: list[np.ndarray], pattern: tuple[int, int]) -> Calibration:
     """The camera's intrinsics and radial distortion from grey or RGB chessboard images of one size."""
     import cv2  # only this tool needs OpenCV
@@ -183,17 +191,21 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         pattern = parse_pattern(args.pattern)
-        images = [np.asarray(Image.open(p).convert("L")) for p in frames_in(args.frames)]
+        images = [_grey(p) for p in frames_in(args.frames)]
         cal = calibrate(images, pattern)
     except ImportError:
         print("error: this tool needs OpenCV: pip install opencv-python-headless", file=sys.stderr)
         return 2
-    except (CalibrationError, OSError) as exc:
+    except CalibrationError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     print(report(cal, TelloCameraParams()))
     if args.json is not None:
-        args.json.write_text(json.dumps(cal.to_dict(), indent=2) + "\n")
+        try:
+            args.json.write_text(json.dumps(cal.to_dict(), indent=2) + "\n")
+        except OSError as exc:
+            print(f"error: cannot write {args.json} ({exc.strerror}); the calibration is printed above", file=sys.stderr)
+            return 2
     return 0
 
 

@@ -54,6 +54,10 @@ def test_bad_input_is_one_line_and_exit_2(tool, tmp_path: Path, capsys: pytest.C
     assert main([str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert "found in 0 of 1 frames; at least 6 are needed" in err and len(err.strip().splitlines()) == 1
+    (tmp_path / "torn.jpg").write_bytes(b"\xff\xd8\xff\xe0 not a whole JPEG")
+    assert main([str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "torn.jpg" in err and len(err.strip().splitlines()) == 1
 
 
 def test_a_directory_of_frames_is_calibrated_and_written(tool, tmp_path: Path,
@@ -69,3 +73,6 @@ def test_a_directory_of_frames_is_calibrated_and_written(tool, tmp_path: Path,
     saved = json.loads((tmp_path / "cal.json").read_text())
     assert saved["views"] == 8 and saved["width"] == 960
     assert saved["diagonal_fov_deg"] == pytest.approx(params.diagonal_fov_deg, abs=0.5)
+    assert tool["main"]([str(tmp_path), "--json", str(tmp_path / "no-such-dir" / "cal.json")]) == 2
+    captured = capsys.readouterr()
+    assert "diagonal field of view" in captured.out and "cannot write" in captured.err

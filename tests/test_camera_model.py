@@ -115,6 +115,26 @@ def test_the_simulator_reads_the_front_camera_back_for_the_tello_model_only(monk
     assert reads == [(480, 640, 4)] * (1 + len(MOVES))
 
 
+def test_a_read_back_that_opengl_refuses_falls_back_to_mujocos_and_the_frames_stay(monkeypatch: pytest.MonkeyPatch
+                                                                                     ) -> None:
+    """PyOpenGL that cannot drive the context (its GLError): the frame comes from MuJoCo's own read-back, the same."""
+    from OpenGL import GL
+    from OpenGL import error as gl_error
+
+    config = SimConfig(rear_camera=False, camera="tello")
+    expected = _fly(config)
+    calls = []
+
+    def refused(*args: object) -> None:
+        calls.append(args)
+        raise gl_error.GLError(err=1282, result=None, cArguments=args, description=b"invalid operation")
+
+    monkeypatch.setattr(GL, "glReadPixels", refused)
+    frames = _fly(config)
+    assert len(calls) == len(expected)  # every frame tried the read-back, and every one fell back
+    assert all(np.array_equal(a, b) for a, b in zip(frames, expected, strict=True))
+
+
 def test_the_ideal_camera_scales_a_randomised_worlds_render_by_its_exposure_bias() -> None:
     rgb = np.arange(256, dtype=np.uint8).repeat(3).reshape(16, 16, 3)
     camera = IdealCamera()
