@@ -204,7 +204,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             args.json.write_text(json.dumps(cal.to_dict(), indent=2) + "\n")
         except OSError as exc:
-            print(f"error: cannot write {args.json} ({exc.strerror}); the calibration is printed above", file=sys.stderr)
+            print(f"error: cannot write {args.json} ({exc.strerror}); the calibration is printed above",
+                  file=sys.stderr)
             return 2
     return 0
 
