@@ -383,20 +383,24 @@ def _say_remote_url(spec: str) -> None:
 
 @contextlib.contextmanager
 def _sigterm_interrupts():
-    """SIGTERM is handled as Ctrl-C (a KeyboardInterrupt): a run's record is closed as 'interrupted', a bench
-    stops its workers (which record their episodes in flight as 'interrupted'), and the exit code is 130."""
+    """SIGTERM, and SIGHUP (the terminal closed, the ssh link dropped), are handled as Ctrl-C (a
+    KeyboardInterrupt): a run's record is closed as 'interrupted', a Tello is landed as the block around it
+    closes, a bench stops its workers (which record their episodes in flight as 'interrupted'), and the exit code
+    is 130."""
     def interrupt(signum: int, frame: object) -> None:
         raise KeyboardInterrupt
 
+    signums = [signal.SIGTERM] + ([signal.SIGHUP] if hasattr(signal, "SIGHUP") else [])
     try:
-        previous = signal.signal(signal.SIGTERM, interrupt)
-    except ValueError:  # not the main thread (an embedding): leave SIGTERM alone
+        previous = {signum: signal.signal(signum, interrupt) for signum in signums}
+    except ValueError:  # not the main thread (an embedding): leave the signals alone
         yield
         return
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def _optional_report(run_dir: Path, *, video: bool = True, bench: bool = False) -> str:

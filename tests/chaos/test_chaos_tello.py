@@ -43,7 +43,7 @@ class NoWaiting(ConsoleOperator):
     def __init__(self) -> None:
         super().__init__(io.StringIO(), io.StringIO())
 
-    def wait(self, message: str) -> None:
+    def wait(self, message: str, until: object = None) -> None:
         raise AssertionError(f"the operator was asked to wait: {message}")
 
 
@@ -56,9 +56,13 @@ class FakePort:
         self.counts = [0, 0, 0]  # state packets, frames, replies
         self.sent: list[tuple[float, str]] = []
         self.replies: list[str] = []
+        self.grounded = False  # what the newest state packet shows
 
     def evidence(self) -> tuple[int, int, int]:
         return tuple(self.counts)  # type: ignore[return-value]
+
+    def on_ground(self) -> bool:
+        return self.grounded
 
     def emergency_send(self, command: str) -> None:
         self.sent.append((self.clock.now(), command))
@@ -75,16 +79,18 @@ def _watchdog(tick: float = 0.05) -> tuple[ManualClock, FakePort, LinkWatchdog]:
     return clock, port, dog
 
 
-def _live(clock: ManualClock, port: FakePort, seconds: float, channel: int = 0) -> None:
+def _live(clock: ManualClock, port: FakePort, seconds: float, channels: tuple[int, ...] = (0, 1)) -> None:
+    """`seconds` of the drone's state packets (10 Hz) and video frames, or of the `channels` given, arriving."""
     for _ in range(round(seconds / 0.1)):
-        port.counts[channel] += 1
+        for channel in channels:
+            port.counts[channel] += 1
         clock.sleep(0.1)
 
 
 def test_the_watchdog_lands_within_one_silence_limit_of_the_last_sign_of_life() -> None:
     clock, port, dog = _watchdog()
     try:
-        _live(clock, port, 3.0)  # 10 Hz state packets: alive
+        _live(clock, port, 3.0)  # 10 Hz state packets and the video: alive
         assert not dog.lost and port.sent == []
         death = clock.now()
         clock.sleep(SILENCE_S - 0.1)
@@ -97,14 +103,62 @@ def test_the_watchdog_lands_within_one_silence_limit_of_the_last_sign_of_life() 
         dog.close(timeout=0)
 
 
-@pytest.mark.parametrize("channel", [1, 2], ids=["video frames", "replies"])
-def test_any_channel_alive_keeps_the_link_alive(channel: int) -> None:
+def test_state_packets_and_video_alive_keep_the_link_alive_without_replies() -> None:
     clock, port, dog = _watchdog()
     try:
-        _live(clock, port, 5.0, channel)  # no state packet for 5 s, but frames (or replies) keep coming
+        _live(clock, port, 5.0, (0, 1))  # no command answered for 5 s: the pilot is thinking
         assert not dog.lost and port.sent == []
     finally:
         dog.close(timeout=0)
+
+
+@pytest.mark.parametrize(("alive", "silent_s", "words"), [
+    ((1, 2), SILENCE_S, "no state packet for"),  # frames and replies, but no height, heading or battery
+    ((0, 2), 2 * SILENCE_S, "no video frame for"),  # state packets, but the pilot would fly blind
+], ids=["state stream dies", "video dies"])
+def test_one_channel_the_drone_is_flown_on_going_silent_lands_it(alive: tuple[int, ...], silent_s: float,
+                                                                 words: str) -> None:
+    clock, port, dog = _watchdog()
+    try:
+        _live(clock, port, 2.0, (0, 1, 2))
+        _live(clock, port, silent_s - 0.2, alive)
+        assert not dog.lost
+        _live(clock, port, 0.4, alive)
+        assert dog.lost and words in dog.reason and dog.cause == "link"
+        assert [c for _, c in port.sent][:1] == ["land"]
+    finally:
+        dog.close(timeout=0)
+
+
+def test_a_limit_passed_between_steps_lands_the_drone_from_the_watchdog() -> None:
+    """The battery does not wait for a slow pilot or operator: the watchdog checks the limits between steps."""
+    clock = ManualClock()
+    port = FakePort(clock)
+    battery = [50]
+    dog = LinkWatchdog(port, clock, silence_s=SILENCE_S, land_confirm_s=CONFIRM_S,
+                       limits=lambda: ("battery_low", "battery at 12 %") if battery[0] < 15 else None)
+    dog.start()
+    try:
+        _live(clock, port, 1.0, (0, 1))
+        assert not dog.lost
+        battery[0] = 12
+        _live(clock, port, 0.3, (0, 1))
+        assert dog.lost and dog.cause == "battery_low" and [c for _, c in port.sent] == ["land"]
+        port.grounded = True  # the state packets show it down: no emergency, whatever the replies
+        _live(clock, port, CONFIRM_S + 1.0, (0, 1))
+        assert dog.done.is_set() and dog.landed and [c for _, c in port.sent] == ["land"]
+    finally:
+        dog.close(timeout=0)
+
+
+def test_an_error_to_land_is_no_landing() -> None:
+    clock, port, dog = _watchdog()
+    _live(clock, port, 1.0)
+    clock.sleep(SILENCE_S + 0.2)
+    port.replies.append("error")
+    clock.sleep(CONFIRM_S + 0.5)
+    assert dog.done.is_set() and not dog.landed
+    assert [c for _, c in port.sent][-1] == "emergency"
 
 
 def test_an_unanswered_land_is_resent_then_followed_by_emergency() -> None:

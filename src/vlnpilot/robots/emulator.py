@@ -14,6 +14,7 @@ import ipaddress
 import random
 import socket
 import threading
+import time
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -78,6 +79,17 @@ class EmulatorConfig:
 
 
 @dataclass
+class EmulatorFaults:
+    """Faults a test switches on while the emulator runs (the settings above hold from the start): one channel
+    silent while the others live, commands refused or lost on the way, replies that come late."""
+
+    state_silent: bool = False  # no state packets (commands and video go on)
+    refuse: set[str] = field(default_factory=set)  # verbs answered "error" and not carried out, e.g. {"land"}
+    lose: set[str] = field(default_factory=set)  # verbs lost on the way to the drone: neither executed nor answered
+    late: dict[str, float] = field(default_factory=dict)  # verb -> seconds its reply comes after it was carried out
+
+
+@dataclass
 class EmulatorLog:
     """What the emulator saw and did, for tests and the operator."""
 
@@ -113,6 +125,8 @@ class TelloEmulator:
         spawn_obj = sim.scene.spawn(spawn) if spawn else sim.scene.spawns[0]
         self.home = spawn_obj.pose
         self.log = EmulatorLog()
+        self.faults = EmulatorFaults()
+        self._replies_due = 0.0  # when the last late reply goes out (monotonic): later ones wait behind it
         self.landed = threading.Event()  # set by land, emergency and the auto-land
         self.auto_landed = threading.Event()
         self._rng = random.Random(self.config.seed)
@@ -179,19 +193,33 @@ class TelloEmulator:
             text = data.decode("utf-8", "replace").strip()
             self._client = sender[0]
             verb = text.split()[0].lower() if text else ""
-            if verb in self.config.lose_verbs:
+            if verb in self.config.lose_verbs or verb in self.faults.lose:
                 self.log.lost.append(text)
                 continue
-            reply = self.handle(text)
+            reply = "error" if verb in self.faults.refuse else self.handle(text)
             if reply is None:
                 continue
             if self._drops(verb):
                 self.log.dropped.append(text)
                 continue
-            try:
-                self.sock.sendto(reply.encode(), sender)
-            except OSError:
-                pass
+            self._reply(reply, sender, self.faults.late.get(verb, 0.0))
+
+    def _reply(self, reply: str, sender: tuple[str, int], late_s: float) -> None:
+        """Send `reply`, `late_s` late; the replies after a late one wait behind it, in order, as a drone that
+        answers one command at a time does (and UDP on one hop keeps)."""
+        now = time.monotonic()
+        due = max(now + late_s, self._replies_due)
+        self._replies_due = due + 1e-3 if due > now else 0.0
+        if due <= now:
+            self._send_reply(reply, sender)
+        else:
+            threading.Timer(due - now, self._send_reply, (reply, sender)).start()
+
+    def _send_reply(self, reply: str, sender: tuple[str, int]) -> None:
+        try:
+            self.sock.sendto(reply.encode(), sender)
+        except OSError:
+            pass
 
     def _drops(self, verb: str) -> bool:
         c = self.config
@@ -324,7 +352,7 @@ class TelloEmulator:
         while not self._stop.wait(0.1):
             with self._state_lock:
                 self._integrate(self.clock.now())
-            if self._client is not None:
+            if self._client is not None and not self.faults.state_silent:
                 packet = ";".join(f"{k}:{v}" for k, v in self.state().items()) + ";\r\n"
                 try:
                     self.sock.sendto(packet.encode(), (self._client, self.config.state_port))

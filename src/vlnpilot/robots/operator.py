@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import select
 import sys
+import threading
 from collections.abc import Callable
 from typing import IO
 
@@ -22,10 +24,28 @@ class ConsoleOperator:
         self.out.flush()
         return self.answers.readline().strip().lower() in ("y", "yes")
 
-    def wait(self, message: str) -> None:
+    def wait(self, message: str, until: threading.Event | None = None) -> None:
+        """Until the operator presses Enter, or `until` is set (what the wait was for happened without them)."""
         self.out.write(f"{message} ")
         self.out.flush()
-        self.answers.readline()
+        if until is None or not _selectable(self.answers):
+            self.answers.readline()
+            return
+        while not until.is_set():
+            if select.select([self.answers], [], [], 0.2)[0]:
+                self.answers.readline()
+                return
+        self.out.write("(no longer waiting)\n")
+        self.out.flush()
+
+
+def _selectable(stream: IO[str]) -> bool:
+    """Whether `stream` is a file that select() can watch (a terminal or pipe; not a StringIO)."""
+    try:
+        stream.fileno()
+    except (OSError, ValueError, AttributeError):
+        return False
+    return sys.platform != "win32"
 
 
 def make_judge(mode: str, operator: ConsoleOperator) -> Callable[[object, object], tuple[bool, str]] | None:

@@ -4,12 +4,14 @@ Commands: A2/A3 are `forward 25/50`; B/C are `cw`/`ccw` 15, 45, 90; A1, D1 and D
 20 cm minimum) are calibrated rc pulses; E sends nothing. A motion is never resent: a rotation whose "ok" is
 lost is judged from the state packet's yaw (one that did not happen is recorded as not executed), a
 translation whose "ok" is lost ends the episode with the drone hovering until the operator says to land. The
-pose is dead reckoning from confirmed commands only (an "ok", or for an rc pulse a state packet after it), with
-the yaw from the state packet. The Tello senses no contact, so `collided` is None (unknown). Safety: the
-first Ctrl-C sends `land`, the second `emergency`; a low battery, the flight-time limit and the geofence land
-the drone; the link watchdog (`tello_watchdog`) lands it when state packets, video and replies all go silent,
-and the episode ends `link_lost`. Every safety event goes to `events` and, if given, one JSON line each in
-`event_log`.
+pose is dead reckoning from confirmed commands only (an "ok", or for an rc pulse a state packet after it and an
+answer to a query sent after it), with the yaw from the state packet. The Tello senses no contact, so `collided`
+is None (unknown). Safety: the first Ctrl-C stops any rc pulse and lands the drone (`land` resent until it is
+down), the second sends `emergency`; a low battery and the flight-time limit land it, between steps too (the
+watchdog checks them while the pilot or the operator takes its time), and so does the geofence; a landing the
+drone does not confirm is resent, then `emergency`; the link watchdog (`tello_watchdog`) lands it when the state
+packets or the video go silent, and the episode ends `link_lost`; a drone found on the ground (it landed by
+itself) ends the episode. Every safety event goes to `events` and, if given, one JSON line each in `event_log`.
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from vlnpilot.core.records import Motion, Observation, Pose, wrap_deg
 from vlnpilot.robots.clock import Clock, WallClock
 from vlnpilot.robots.operator import ConsoleOperator
 from vlnpilot.robots.tello_config import TelloConfig, load_tello_config
-from vlnpilot.robots.tello_link import LinkError, RobotError, TelloLink
+from vlnpilot.robots.tello_link import LinkError, RobotError, TelloLink, on_ground
 from vlnpilot.robots.tello_watchdog import LinkWatchdog
 from vlnpilot.scene import Scene, Spawn, load_scene
 
@@ -66,7 +68,8 @@ class TelloEnv:
         # test drives it with a clock of its own.
         self.link_clock = link_clock or WallClock()
         self.watchdog: LinkWatchdog | None = None
-        self._event_lock = threading.Lock()  # the watchdog reports from its own thread
+        # the watchdog reports from its own thread; re-entrant, as a Ctrl-C may land while this thread holds it
+        self._event_lock = threading.RLock()
         self.operator = operator or ConsoleOperator()
         self.event_log = Path(event_log) if event_log else None
         self.handle_sigint = handle_sigint
@@ -122,8 +125,12 @@ class TelloEnv:
                              f"{cfg.takeoff_battery_pct} %: charge it before flying")
         self._stream_on(link)
         link.start_video()
+        if not link.first_frame(cfg.frame_timeout_s):
+            raise LinkError(f"no video frame from the Tello within {cfg.frame_timeout_s:g} s of 'streamon' (UDP port "
+                            f"{cfg.video_port}): it is not taking off blind; check the firewall")
         self.watchdog = LinkWatchdog(link, self.link_clock, silence_s=cfg.link_silence_s,
-                                     land_confirm_s=cfg.land_confirm_s, report=self._event)
+                                     video_silence_s=cfg.video_silence_s, land_confirm_s=cfg.land_confirm_s,
+                                     report=self._event, limits=self._limit_passed)
         self.watchdog.start()  # from take-off on, a dead link lands the drone
         self._takeoff(link)
         self._event("takeoff", battery_pct=battery)
@@ -136,7 +143,8 @@ class TelloEnv:
 
     def step(self, command: Command | str) -> Observation:
         cmd = command if isinstance(command, Command) else get_command(command)
-        self._check_link()  # a link found dead while the pilot thought: nothing is sent
+        self._check_link()  # a link found dead (or the drone landed) while the pilot thought: nothing is sent
+        self._check_airborne()
         self._check_limits()
         executed = True
         if cmd.is_rotation:
@@ -264,6 +272,7 @@ class TelloEnv:
         lr = {Kind.LATERAL_LEFT: -pulse.speed, Kind.LATERAL_RIGHT: pulse.speed}.get(cmd.kind, 0)
         self._connected.pulse(lr, pulse.speed if cmd.kind is Kind.FORWARD else 0, pulse.duration_s, pulse.settle_s)
         self._confirm_link(f"the rc pulse of {cmd.code}")
+        self._confirm_uplink(f"the rc pulse of {cmd.code}")
         self._pose = cmd.motion().apply(self._pose)
 
     # -- the link ---------------------------------------------------------------------------------------------
@@ -277,9 +286,36 @@ class TelloEnv:
             self._link_lost(executed=False)
         return state
 
+    def _confirm_uplink(self, what: str) -> None:
+        """A state packet shows that the drone's packets reach us, not that ours reach it: a query answered after
+        `what` does. None answered: the commands no longer reach the drone; land (it lands by itself 15 s after
+        the last command it received), end."""
+        link = self._connected
+        if link.send("battery?", min(self.config.reply_timeout_s, 2.0)) is None and not link.lost.is_set():
+            if self.watchdog is not None:
+                self.watchdog.declare_lost(f"{what} and no answer to a query after it: commands do not reach the drone")
+            self._link_lost(executed=False)
+
     def _check_link(self, executed: bool = False, obs: Observation | None = None) -> None:
-        if self.link is not None and self.link.lost.is_set():
-            self._link_lost(executed, obs)
+        """Once the watchdog has landed the drone, end the episode: `link_lost`, or halted by the limit it landed
+        for."""
+        if self.link is None or not self.link.lost.is_set():
+            return
+        dog = self.watchdog
+        if dog is not None and dog.cause not in ("", "link"):
+            self.flying = self.awaiting_operator = False  # the watchdog lands it; nothing else is sent
+            raise RobotHalt(f"{dog.reason}: 'land' sent", obs or self._observe(time.monotonic(), executed),
+                            landed=True, executed=executed)
+        self._link_lost(executed, obs)
+
+    def _check_airborne(self) -> None:
+        """A drone found on the ground landed by itself (the Tello does 15 s after its last command, as when this
+        computer slept): nothing more is flown."""
+        if self.flying and on_ground(self._connected.state()):
+            self.flying = self.awaiting_operator = False
+            self._event("auto_landed", action="the episode ends")
+            raise RobotHalt("the drone is on the ground: it landed by itself (a Tello lands 15 s after the last "
+                            "command it received)", self._observe(time.monotonic(), False), landed=True)
 
     def _link_lost(self, executed: bool, obs: Observation | None = None) -> NoReturn:
         self.flying = self.awaiting_operator = False  # the watchdog lands it; nothing else is sent
@@ -309,14 +345,22 @@ class TelloEnv:
 
     # -- safety -----------------------------------------------------------------------------------------------
     def _check_limits(self) -> None:
-        cfg = self.config
-        battery = self._connected.state().get("bat")
+        passed = self._limit_passed()
+        if passed is not None:
+            self._land_and_halt(passed[1], passed[0])
+
+    def _limit_passed(self) -> tuple[str, str] | None:
+        """(event kind, reason) of a limit the flight has passed, or None; read by the watchdog's thread too."""
+        cfg, link = self.config, self.link
+        if not self.flying or link is None:
+            return None
+        battery = link.state().get("bat")
         if battery is not None and int(battery) < cfg.land_battery_pct:
-            self._land_and_halt(f"battery at {battery} %, below the landing floor of {cfg.land_battery_pct} %",
-                                "battery_low")
+            return "battery_low", f"battery at {battery} %, below the landing floor of {cfg.land_battery_pct} %"
         flown = self.clock.now() - self._takeoff_t
         if flown > cfg.max_flight_s:
-            self._land_and_halt(f"{flown:.0f} s of flight passed the limit of {cfg.max_flight_s:g} s", "flight_time")
+            return "flight_time", f"{flown:.0f} s of flight passed the limit of {cfg.max_flight_s:g} s"
+        return None
 
     def _land_and_halt(self, reason: str, kind: str, obs: Observation | None = None, *,
                        executed: bool = False) -> None:
@@ -325,14 +369,22 @@ class TelloEnv:
         raise RobotHalt(reason, obs or self._observe(time.monotonic(), executed), landed=True, executed=executed)
 
     def land(self) -> None:
-        if self.flying and self.link is not None and not self.link.lost.is_set():  # else the watchdog lands it
-            reply = None
-            for _ in range(3):  # unlike a move, a repeated `land` is harmless: ask again when the "ok" is lost
-                reply = self.link.send("land")  # the Tello answers once it is down (a few seconds)
-                if reply is not None:
-                    break
-            self.flying = self.awaiting_operator = False
+        """`land`, confirmed by its "ok" or a state packet on the ground; else the watchdog's landing sequence
+        (`land` resent until the drone is down, then `emergency`), which `close()` lets finish."""
+        if not (self.flying and self.link is not None) or self.link.lost.is_set():  # else the watchdog lands it
+            return
+        reply = None
+        for _ in range(3):  # unlike a move, a repeated `land` is harmless: ask again when the "ok" is lost
+            reply = self.link.send("land")  # the Tello answers once it is down (a few seconds)
+            if reply is not None:
+                break
+        self.flying = self.awaiting_operator = False
+        if reply == "ok" or on_ground(self.link.fresh_state() or {}):
             self._event("land", reply=reply)
+            return
+        self._event("land_unconfirmed", reply=reply, action="land resent until the drone is down, then emergency")
+        if self.watchdog is not None:
+            self.watchdog.declare_lost(f"'land' answered {reply!r} and the drone is not down", "land_unconfirmed")
 
     def _event(self, kind: str, **facts: Any) -> None:
         event = {"event": kind, "t": round(self.clock.now() - self._takeoff_t, 3) if self._takeoff_t else 0.0,
@@ -349,11 +401,16 @@ class TelloEnv:
             self._old_sigint = signal.signal(signal.SIGINT, self._on_sigint)
 
     def _on_sigint(self, signum: int, frame: object) -> None:
-        """First Ctrl-C: `land`; any further one: `emergency` (motors off). Both bypass the command lock."""
+        """First Ctrl-C: stop any rc pulse under way, `land`, and the watchdog resends it until the drone is down
+        (then `emergency`); any further one: `emergency` (motors off). All bypass the command lock."""
         self.interrupts += 1
         command = "land" if self.interrupts == 1 else "emergency"
         if self.link is not None:
+            if command == "land":
+                self.link.emergency_send("rc 0 0 0 0")  # an rc pulse cut short holds its velocity otherwise
             self.link.emergency_send(command)
+            if command == "land" and self.flying and self.watchdog is not None:
+                self.watchdog.declare_lost("the operator pressed Ctrl-C", "operator_interrupt")
         self.flying = self.awaiting_operator = False
         self._event("operator_interrupt", action=command)
         raise KeyboardInterrupt
@@ -368,7 +425,9 @@ class TelloEnv:
         self.closed = True
         try:
             if self.flying and self.awaiting_operator and not self.link.lost.is_set():
-                self.operator.wait("The Tello is hovering after a lost reply. Press Enter to land it.")
+                # a limit that passes meanwhile lands it (the watchdog) and ends the wait
+                self.operator.wait("The Tello is hovering after a lost reply. Press Enter to land it.",
+                                   until=self.link.lost)
             self.land()
             if self.streaming and not self.link.lost.is_set():
                 self.link.send("streamoff", self.config.connect_timeout_s)

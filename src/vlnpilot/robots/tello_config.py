@@ -59,6 +59,7 @@ class TelloConfig(_Strict):
     keepalive_s: float = Field(gt=0, le=10)
     video_latency_s: float = Field(ge=0, le=5)
     link_silence_s: float = Field(gt=0, le=1.5)  # at most 1.5 s, so that `land` goes out within 2 s of a death
+    video_silence_s: float = Field(gt=0, le=3)  # no frame this long in flight: the pilot is blind, land
     land_confirm_s: float = Field(gt=0, le=10)
     ext_tof: bool = False  # a RoboMaster TT (Tello Talent): its open-source controller answers `EXT tof?`
 

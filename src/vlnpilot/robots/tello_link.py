@@ -24,6 +24,16 @@ from vlnpilot.robots.tello_config import TelloConfig
 
 CLOSED_HOST = "127.255.255.254"
 MIN_GAP_S = 0.1  # the Tello drops commands sent closer together than this (djitellopy's TIME_BTW_COMMANDS)
+RESYNC_TRIES = 3
+GROUND_TOF_CM = 20  # the time-of-flight sensor reads 10 cm on the ground; a Tello flies at 30 cm or more
+
+
+def on_ground(state: dict[str, Any]) -> bool:
+    """Whether a state packet shows the drone on the ground: no height over take-off, the floor within reach."""
+    try:
+        return bool(state) and int(state.get("h", 1)) <= 0 and int(state.get("tof", GROUND_TOF_CM + 1)) <= GROUND_TOF_CM
+    except (TypeError, ValueError):
+        return False
 
 
 class RobotError(VLNPilotError):
@@ -112,6 +122,7 @@ class TelloLink:
         self.lost = threading.Event()  # set by the watchdog: the link is dead
         self._state_seen: Any = None  # the state packet last counted (held, so a new one cannot reuse its id)
         self._state_packets = 0
+        self._unsynced = False  # a reply did not come in time: it may yet come, and pass for the next one's
         self.frames: StampedFrames | None = None
         self._stop = threading.Event()
         self._keepalive: threading.Thread | None = None
@@ -123,8 +134,8 @@ class TelloLink:
             return self._send(command, self.config.reply_timeout_s if timeout is None else timeout)
 
     def _send(self, command: str, timeout: float) -> str | None:
-        if self.lost.is_set():
-            return None
+        if self.lost.is_set() or (self._unsynced and not self._resync()):
+            return None  # not sent: the link is lost, or lost track of which reply answers what
         responses = self._responses()
         responses.clear()  # a late reply to an earlier command must not pass for this one's
         time.sleep(max(0.0, MIN_GAP_S - (time.monotonic() - self._last_reply)))
@@ -132,11 +143,30 @@ class TelloLink:
         deadline = time.monotonic() + timeout
         while not responses:
             if time.monotonic() > deadline or self.lost.is_set():  # a reply after the loss may be the land's
+                self._unsynced = True  # its reply may still come, during the next command's wait
                 return None
             time.sleep(0.005)
         self._last_reply = time.monotonic()
         self.replies += 1
         return responses.pop(0).decode("utf-8", "replace").strip()
+
+    def _resync(self) -> bool:
+        """After a reply that did not come in time: `battery?` until a number answers it, which no late "ok" or
+        "error" can pass for; what came before it answered earlier commands and is dropped. False if none did."""
+        responses = self._responses()
+        for _ in range(RESYNC_TRIES):
+            responses.clear()
+            time.sleep(max(0.0, MIN_GAP_S - (time.monotonic() - self._last_reply)))
+            self._raw("battery?")
+            deadline = time.monotonic() + min(self.config.reply_timeout_s, 2.0)
+            while time.monotonic() < deadline and not self.lost.is_set():
+                while responses:
+                    if responses.pop(0).decode("utf-8", "replace").strip().isdigit():
+                        self._last_reply, self._unsynced = time.monotonic(), False
+                        self.replies += 1
+                        return True
+                time.sleep(0.005)
+        return False
 
     def _responses(self) -> list[bytes]:
         return self.tello.get_own_udp_object()["responses"]
@@ -174,6 +204,10 @@ class TelloLink:
             self._state_seen, self._state_packets = state, self._state_packets + 1
         return self._state_packets, self.frames.count if self.frames is not None else 0, self.replies
 
+    def on_ground(self) -> bool:
+        """Whether the newest state packet shows the drone on the ground (the watchdog's landing check)."""
+        return on_ground(self.tello.get_current_state())
+
     # -- state -------------------------------------------------------------------------------------------------
     def state(self) -> dict[str, Any]:
         return dict(self.tello.get_current_state())
@@ -198,6 +232,16 @@ class TelloLink:
         except (TelloException, OSError) as exc:
             raise LinkError(f"no video from the Tello on UDP port {self.config.video_port} ({exc}); check that no "
                              "other program reads the stream and that the firewall lets UDP in") from None
+
+    def first_frame(self, timeout: float) -> bool:
+        """Whether a frame was decoded within `timeout` of now (before take-off: the pilot must not fly blind)."""
+        assert self.frames is not None, "start_video() first"
+        deadline = time.monotonic() + timeout
+        while self.frames.count < 1:
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.01)
+        return True
 
     def fresh_frame(self, settled_at: float) -> tuple[np.ndarray, dict[str, Any]]:
         """The newest frame decoded at least `video_latency_s` after `settled_at` (wall clock), and its timing.

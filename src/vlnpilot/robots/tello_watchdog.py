@@ -1,12 +1,16 @@
-"""The Tello's link watchdog: a dead link (state packets, video frames and replies all silent) lands the drone.
+"""The Tello's watchdog: a link that goes silent, or a limit that passes, lands the drone from a helper thread.
 
 A Tello sends a state packet ten times a second and a video stream without pause, and answers every command
-but `rc`. The watchdog samples those three channels every `POLL_S` on its clock. When none of them has shown
-a sign of life for `link_silence_s` (1 s by default: ten state packets in a row missing, about 15-30 frames), the
-link is declared lost: nothing more is sent but `land`, resent every second (a repeated `land` is harmless)
-until a reply comes, and `emergency` (motors off) if none came within `land_confirm_s`. The episode's thread
-sees `lost` and ends the episode `link_lost`. Should every packet of ours be lost too, the Tello lands by
-itself 15 s after the last command it received, and after the loss we send it nothing else.
+but `rc`. The watchdog samples those channels every `POLL_S` on its clock. The drone is flown on both of them:
+without state packets its height, heading and battery are unknown, without frames the pilot flies blind. So
+when the state packets have been silent for `link_silence_s` (1 s by default: ten in a row missing), or the
+video for `video_silence_s` (2 s: 30-60 frames), the link is declared lost. It also lands the drone when a
+limit passes while nobody steps (`limits`: the battery floor, the flight time; the pilot or the operator may
+take their time, the battery does not wait). Then nothing more is sent but `land`, resent every second until
+the drone is down (an "ok", or a state packet showing it on the ground; an "error" is no landing), and
+`emergency` (motors off) if it is not within `land_confirm_s`. The episode's thread sees `lost` and ends the
+episode (`cause` says whether the link or a limit ended it). Should every packet of ours be lost too, the Tello
+lands by itself 15 s after the last command it received, and after the loss we send it nothing else.
 
 A wake-up that comes late (this process was starved of the CPU) does not count the time it was not looking as
 silence: only silence observed on schedule declares a loss, so a busy machine does not land a healthy drone.
@@ -15,6 +19,7 @@ silence: only silence observed on schedule declares a loss, so a busy machine do
 from __future__ import annotations
 
 import threading
+from collections.abc import Callable
 from typing import Any, Protocol
 
 from vlnpilot.robots.clock import Clock
@@ -37,23 +42,31 @@ class LinkPort(Protocol):
     def poll_reply(self) -> str | None:
         """A reply that arrived and nobody took yet, or None."""
 
+    def on_ground(self) -> bool:
+        """Whether the newest state packet shows the drone on the ground."""
+
 
 class LinkWatchdog:
     """Watches `port` on `clock` from a helper thread; `lost_at` / `reason` say when and why it gave up."""
 
     def __init__(self, port: LinkPort, clock: Clock, *, silence_s: float, land_confirm_s: float,
-                 report: Any = None):
+                 video_silence_s: float | None = None, report: Any = None,
+                 limits: Callable[[], tuple[str, str] | None] | None = None):
         self.port, self.clock = port, clock
         self.silence_s, self.land_confirm_s = silence_s, land_confirm_s
+        self.video_silence_s = 2 * silence_s if video_silence_s is None else video_silence_s
         self.report = report or (lambda kind, **facts: None)  # the backend's event log
+        self.limits = limits or (lambda: None)  # (event kind, reason) of a limit passed, or None
         self.lost_at: float | None = None
         self.silent_since: float | None = None  # the last sign of life before the loss
         self.reason = ""
+        self.cause = ""  # what ended the flight: "link", a limit's kind (battery_low, ...) or "operator_interrupt"
+        self.landed: bool | None = None  # after the landing sequence: down (True) or emergency sent (False)
         self.sent: list[tuple[float, str]] = []  # (clock time, command) of the landing sequence
         self.done = threading.Event()  # the landing sequence is over (or there was none)
         self._wake = threading.Event()
         self._closing = False
-        self._declared: str | None = None
+        self._declared: tuple[str, str] | None = None
         self._thread: threading.Thread | None = None
 
     @property
@@ -65,10 +78,11 @@ class LinkWatchdog:
             self._thread = threading.Thread(target=self._run, name="tello-link-watchdog", daemon=True)
             self._thread.start()
 
-    def declare_lost(self, reason: str) -> None:
-        """The backend saw the link die itself (no reply and no state packet after a command): land now."""
+    def declare_lost(self, reason: str, cause: str = "link") -> None:
+        """The backend saw the link die itself (no reply and no state packet after a command), or wants the drone
+        down and nothing else sent (`cause`: a Ctrl-C, a landing the drone did not confirm): land now."""
         if not self.lost and self._declared is None:
-            self._declared = reason
+            self._declared, self.reason = (reason, cause), reason  # the reason at once: the backend quotes it
             self._wake.set()
             self.clock.wake()
 
@@ -103,41 +117,72 @@ class LinkWatchdog:
             if self._closing:
                 return False
             if self._declared is not None:
-                return self._give_up(self._declared, max(seen))
+                reason, cause = self._declared
+                return self._give_up(reason, cause, max(seen), announce=cause == "link")
             previous, now = now, self.clock.now()
             if now - previous > 2 * POLL_S:  # this thread was not running: what it did not watch is no silence
                 seen = [t + (now - previous - POLL_S) for t in seen]
             current = self.port.evidence()
             seen = [now if c != p else t for c, p, t in zip(current, last, seen, strict=True)]
             last = current
-            if now - max(seen) >= self.silence_s:
-                return self._give_up(f"no state packet, video frame or reply for {now - max(seen):.1f} s "
-                                     f"(limit {self.silence_s:g} s)", max(seen))
+            silent = self._silence(now, seen)
+            if silent is not None:
+                return self._give_up(silent[0], "link", silent[1])
+            passed = self.limits()
+            if passed is not None:
+                return self._give_up(passed[1], passed[0], max(seen))
         return False
 
-    def _give_up(self, reason: str, silent_since: float) -> bool:
-        self.port.lost.set()  # first: no command of the episode's may take the land's reply for its own
-        self.lost_at, self.silent_since, self.reason = self.clock.now(), silent_since, reason
-        self.report("link_lost", reason=reason, action="land")
+    def _silence(self, now: float, seen: list[float]) -> tuple[str, float] | None:
+        """Why the link counts as lost (a channel the drone is flown on silent too long) and its last sign of life
+        (`seen`: when the state packets, frames and replies last came), or None."""
+        state, video = now - seen[0], now - seen[1]
+        if state >= self.silence_s and video >= self.silence_s:
+            return (f"no state packet or video frame for {min(state, video):.1f} s (limit {self.silence_s:g} s)",
+                    max(seen[:2]))
+        if state >= self.silence_s:
+            return (f"no state packet for {state:.1f} s (limit {self.silence_s:g} s): the drone's height, heading "
+                    "and battery are unknown", seen[0])
+        if video >= self.video_silence_s:
+            return (f"no video frame for {video:.1f} s (limit {self.video_silence_s:g} s): the pilot would fly "
+                    "blind", seen[1])
+        return None
+
+    def _give_up(self, reason: str, cause: str, silent_since: float, announce: bool = True) -> bool:
+        """Why and since when, then `lost` before anything else is sent (no command of the episode's may take
+        the land's reply for its own); `announce`: report it (a cause the backend declared, it reported)."""
+        self.lost_at, self.silent_since, self.reason, self.cause = self.clock.now(), silent_since, reason, cause
+        self.port.lost.set()
+        if announce:
+            self.report("link_lost" if cause == "link" else cause, reason=reason, action="land")
         return True
 
     def _land(self) -> None:
-        """`land` every LAND_RESEND_S until a reply, then `emergency` if none came within land_confirm_s."""
+        """`land` every LAND_RESEND_S until the drone is down ("ok", or a state packet on the ground), then
+        `emergency` if it is not within land_confirm_s."""
         start = self.clock.now()
         self._wake.clear()
         while self.port.poll_reply() is not None:  # late answers to earlier commands are no answer to `land`
             pass
+        refused: list[str] = []
         while self.clock.now() - start < self.land_confirm_s and not self._closing:
             self._send("land")
             resend = min(self.clock.now() + LAND_RESEND_S, start + self.land_confirm_s)
             while self.clock.now() < resend and not self._closing:
                 reply = self.port.poll_reply()
-                if reply is not None:
-                    self.report("land", reply=reply, action="a reply after `land`: no emergency")
+                if reply == "ok" or self.port.on_ground():
+                    self.landed = True
+                    self.report("land", reply=reply, action="down: no emergency")
                     return
+                if reply is not None:
+                    refused.append(reply)  # an "error" to `land` is no landing: asked again
                 self.clock.wait_until(min(resend, self.clock.now() + POLL_S), self._wake)
+        if self._closing:
+            return
         self._send("emergency")
-        self.report("emergency", reason=f"no reply to 'land' within {self.land_confirm_s:g} s",
+        self.landed = False
+        self.report("emergency", reason=f"not down within {self.land_confirm_s:g} s of 'land'"
+                    + (f" (it answered {', '.join(sorted(set(refused)))})" if refused else " (no reply)"),
                     action="emergency: motors off")
 
     def _send(self, command: str) -> None:
