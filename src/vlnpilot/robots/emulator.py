@@ -196,13 +196,18 @@ class TelloEmulator:
             if verb in self.config.lose_verbs or verb in self.faults.lose:
                 self.log.lost.append(text)
                 continue
-            reply = "error" if verb in self.faults.refuse else self.handle(text)
+            reply = self._refuse(text) if verb in self.faults.refuse else self.handle(text)
             if reply is None:
                 continue
             if self._drops(verb):
                 self.log.dropped.append(text)
                 continue
             self._reply(reply, sender, self.faults.late.get(verb, 0.0))
+
+    def _refuse(self, text: str) -> str:
+        """A command received and answered "error", not carried out (`faults.refuse`)."""
+        self.log.received.append((self.clock.now(), text))
+        return "error"
 
     def _reply(self, reply: str, sender: tuple[str, int], late_s: float) -> None:
         """Send `reply`, `late_s` late; the replies after a late one wait behind it, in order, as a drone that

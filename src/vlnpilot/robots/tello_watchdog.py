@@ -82,7 +82,8 @@ class LinkWatchdog:
         """The backend saw the link die itself (no reply and no state packet after a command), or wants the drone
         down and nothing else sent (`cause`: a Ctrl-C, a landing the drone did not confirm): land now."""
         if not self.lost and self._declared is None:
-            self._declared, self.reason = (reason, cause), reason  # the reason at once: the backend quotes it
+            self._declared, self.reason, self.cause = (reason, cause), reason, cause  # the backend quotes them
+            self.port.lost.set()  # at once: no command sent meanwhile (a `streamoff`) may take the land's reply
             self._wake.set()
             self.clock.wake()
 
