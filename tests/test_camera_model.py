@@ -189,7 +189,8 @@ def test_a_tello_run_is_recorded_and_its_replay_reproduces_every_frame(tmp_path:
     assert all((flown / "frames" / n).read_bytes() == (replayed / "frames" / n).read_bytes() for n in steps)
     code, _, err = run_main(monkeypatch, capsys, "run", "Go to the kitchen", "--pilot", f"replay:{flown}",
                             "--camera", "ideal", "--out", str(tmp_path / "other"), "--no-video", "-q")
-    assert code == 2 and len(err.strip().splitlines()) == 1 and "--camera tello" in err
+    assert code == 2 and len(err.strip().splitlines()) == 1, err  # the replay's refusal, not the recorded lag's
+    assert "was flown with other frames; replay it with --camera tello --camera-lag-ms 300.0 --randomize 3" in err
     assert not (tmp_path / "other").exists()  # refused before anything is written
     # as a trial: its set's suite replays the row in the same world (tests/test_trials.py reads it too)
     import runpy
@@ -215,6 +216,7 @@ def test_a_run_with_the_ideal_camera_records_no_camera(tmp_path: Path, monkeypat
     (("--camera", "fisheye"), "unknown camera 'fisheye'; valid cameras: ideal, tello"),
     (("--camera-lag-ms", "100"), "a camera lag applies to --camera tello only"),
     (("--robot", "tello", "--camera", "ideal"), "--camera ideal applies to --robot sim only"),
+    (("--robot", "tello", "--camera-lag-ms", "500"), "vln-pilot tello-emulator --video-delay 0.5"),
 ])
 def test_bad_camera_options_get_one_line_and_exit_2(args: tuple[str, ...], says: str, tmp_path: Path,
                                                     monkeypatch: pytest.MonkeyPatch,
@@ -227,8 +229,12 @@ def test_bad_camera_options_get_one_line_and_exit_2(args: tuple[str, ...], says:
 
 def test_a_real_tello_frames_are_never_post_processed() -> None:
     check_camera_for("tello", "tello", None, None)  # what it is: accepted, and nothing is applied
-    with pytest.raises(ConfigError, match="--randomize applies to --robot sim only"):
+    with pytest.raises(ConfigError, match=r"--randomize applies to --robot sim only .*tello-emulator --randomize 4\)"):
         check_camera_for("tello", None, None, 4)
+    # the emulator has no --camera-lag-ms: its frame lag is --video-delay, in seconds
+    with pytest.raises(ConfigError, match=r"--camera-lag-ms applies to --robot sim only .*its --video-delay, in "
+                                          r"seconds: vln-pilot tello-emulator --video-delay 0.5\)"):
+        check_camera_for("tello", None, 500.0, None)
 
 
 def _suite(**extra: object) -> dict:

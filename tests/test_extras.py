@@ -104,6 +104,16 @@ def test_every_extra_module_comes_from_its_extra_in_pyproject() -> None:
     assert "vln-pilot[all]" in optional["test"]
 
 
+def test_the_install_page_lists_every_extra() -> None:
+    """docs/install.md's extras table has one row per extra of pyproject.toml, `all` and `test` included."""
+    import re
+
+    optional = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
+    page = (ROOT / "docs" / "install.md").read_text()
+    listed = re.findall(r"^\| `([a-z]+)` \|", page, flags=re.MULTILINE)
+    assert sorted(listed) == sorted(optional)
+
+
 _PLAIN_INSTALL = textwrap.dedent("""
     import importlib.abc, sys
     BLOCKED = set(sys.argv[1].split(","))

@@ -3,7 +3,7 @@ command line, importable without the simulator (a suite that pins its camera is 
 
 from __future__ import annotations
 
-from vlnpilot.core.errors import UnknownNameError
+from vlnpilot.core.errors import ConfigError, UnknownNameError
 
 CAMERAS = ("ideal", "tello")  # --camera: ideal (the render), tello (the Tello's stream)
 DEFAULT_CAMERA = "ideal"
@@ -15,3 +15,9 @@ def check_camera(name: str) -> str:
     if key not in CAMERAS:
         raise UnknownNameError("camera", name, CAMERAS)
     return key
+
+
+def check_camera_lag(camera: str | None, lag_ms: float | None) -> None:
+    """A frame lag is the tello camera's (`--camera-lag-ms`): one line where it is asked of another camera."""
+    if lag_ms is not None and check_camera(camera or DEFAULT_CAMERA) != "tello":
+        raise ConfigError("a camera lag applies to --camera tello only")

@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from vlnpilot.core.cameras import check_camera_lag
 from vlnpilot.core.decision import INVALID_ENUM, Decision, DecisionError, PilotInput, parse_decision
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.rundir import load_run, load_summary, load_trial
@@ -199,8 +200,13 @@ def camera_flown_with(config: dict[str, Any]) -> dict[str, Any]:
 
 def check_replay_camera(spec: str | None, now: dict[str, Any]) -> None:
     """Refuse (one line) to replay a `replay:RUN_DIR` recording with other frames than it was flown with
-    (`now`: `camera_flown_with` of this run's camera): the same answers to other images are not the recording."""
+    (`now`: `camera_flown_with` of this run's camera): the same answers to other images are not the recording.
+    A lag asked of another camera than tello is refused too: in one line of its own, unless the recording was
+    flown with a lag (a tello recording replayed with `--camera ideal` carries its recorded lag), where the
+    replay's refusal names the settings to replay it with."""
     differs = frames_differ(spec, now)
+    if differs is None or "camera_lag_ms" not in differs[1]:
+        check_camera_lag(now.get("camera"), now.get("camera_lag_ms"))
     if differs is not None:
         run_dir, then = differs
         flags = " ".join(f"--{key.replace('_', '-')} {value}" for key, value in then.items()) or "--camera ideal"

@@ -132,23 +132,26 @@ def robot_capabilities(robot: str, sensors: str = "none", tello_host: str | None
 
 def check_camera_for(robot: str, camera: str | None, camera_lag_ms: float | None, randomize: int | None) -> None:
     """Refuse (one line) a simulated camera or world for a robot whose frames are real: a Tello's own stream is
-    never post-processed (its emulator simulates the Tello's camera itself: `vln-pilot tello-emulator --camera`)."""
+    never post-processed (its emulator simulates the Tello's camera itself, its lag as `--video-delay`). In
+    simulation a lag without the tello camera is refused by `pilots.replay.check_replay_camera`, after a replay's
+    own refusal (a replay's recorded lag with `--camera ideal` is a replay flown with other frames)."""
     from vlnpilot.core.cameras import check_camera
 
     key = str(robot).strip().lower()
     if camera is not None:
         camera = check_camera(camera)
     if key == "sim":
-        if camera_lag_ms is not None and camera != "tello":
-            raise ConfigError("a camera lag applies to --camera tello only")
         return
     if camera == "ideal":
         raise ConfigError(f"--robot {key} sends its own camera's frames: --camera ideal applies to --robot sim only "
                           "(simulate the Tello's camera in its emulator: vln-pilot tello-emulator --camera tello)")
-    if randomize is not None or camera_lag_ms is not None:
-        flag = "--randomize" if randomize is not None else "--camera-lag-ms"
-        raise ConfigError(f"{flag} applies to --robot sim only (the emulator takes it: vln-pilot tello-emulator "
-                          f"{flag} ...)")
+    if randomize is not None:
+        raise ConfigError(f"--randomize applies to --robot sim only (the emulator takes it: vln-pilot tello-emulator "
+                          f"--randomize {randomize})")
+    if camera_lag_ms is not None:
+        seconds = f"{camera_lag_ms / 1000:g}"
+        raise ConfigError(f"--camera-lag-ms applies to --robot sim only (the emulator's frame lag is its "
+                          f"--video-delay, in seconds: vln-pilot tello-emulator --video-delay {seconds})")
 
 
 @contextmanager

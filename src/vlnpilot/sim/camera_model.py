@@ -318,13 +318,16 @@ class IdealCamera:
 
 
 def camera_flown_with(camera: str | None, lag_ms: float | None, randomize: int | None) -> dict[str, object]:
-    """What a run with these options records of its frames, as `pilots.replay.camera_flown_with` reads it back."""
+    """What a run with these options records of its frames, as `pilots.replay.camera_flown_with` reads it back. A lag
+    asked of the ideal camera is kept, so that `pilots.replay.check_replay_camera` refuses it."""
     key = check_camera(camera or DEFAULT_CAMERA)
-    if key == "ideal" and randomize is None:
+    if key == "ideal" and randomize is None and lag_ms is None:
         return {}
     out: dict[str, object] = {"camera": key}
     if key == "tello":
         out["camera_lag_ms"] = TelloCameraParams().lag_ms if lag_ms is None else float(lag_ms)
+    elif lag_ms is not None:
+        out["camera_lag_ms"] = float(lag_ms)
     if randomize is not None:
         out["randomize"] = int(randomize)
     return out

@@ -16,7 +16,7 @@ gl.choose_backend()  # before MuJoCo's first import fixes its GL backend (only i
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 
-from vlnpilot.core.cameras import check_camera  # noqa: E402
+from vlnpilot.core.cameras import check_camera, check_camera_lag  # noqa: E402
 from vlnpilot.core.commands import Command, get_command  # noqa: E402
 from vlnpilot.core.environment import Capabilities, GroundTruth  # noqa: E402
 from vlnpilot.core.errors import ConfigError, UnknownNameError  # noqa: E402
@@ -80,8 +80,7 @@ class SimConfig:
         range_sensor(self.sensors)  # a bad name is refused here, in one line
         check_detail(self.detail)
         object.__setattr__(self, "camera", check_camera(self.camera))
-        if self.camera_lag_ms is not None and self.camera != "tello":
-            raise ConfigError("a camera lag applies to --camera tello only")
+        check_camera_lag(self.camera, self.camera_lag_ms)
         if self.randomize is not None and (isinstance(self.randomize, bool) or not isinstance(self.randomize, int)
                                            or not 0 <= self.randomize < 2**31):
             raise ConfigError(f"randomize must be a seed in 0..{2**31 - 1}, got {self.randomize!r}")
