@@ -1,15 +1,16 @@
-"""Time from a Tello link's death to the `land` command: the emulator killed at random steps of an episode.
+"""Time from a Tello link's death to the `land` command: the emulator's link cut at random steps of an episode.
 
 Each run starts the emulator on free loopback ports (127.0.0.1 only), connects the Tello backend with the
-default settings of tello.yaml (link_silence_s 1.0, land_confirm_s 5.0), and flies an episode whose pilot,
-at a random step, has the emulator killed after a random delay (0-1.5 s: during the move, the frame wait or
-the next ask). Both are drawn from --seed. A run passes when the episode ends `link_lost`, the watchdog's first
-`land` left within 2 s of the death, and no more moves are recorded as executed than the emulator had
-received when it died (every step asked after the death: nothing executed). Prints each run, the median and
-the maximum time to `land`, and the machine; writes the table to bench/results/link_loss.md. The exit code
-is 1 if any run failed.
+default settings of tello.yaml (link_silence_s 1.0, video_silence_s 2.0, land_confirm_s 5.0), and flies an
+episode whose pilot, at a random step, has the link cut after a random delay (0-1.5 s: during the move, the
+frame wait or the next ask). Both are drawn from --seed. Three cuts: `link` (the emulator killed: every channel
+dies), `state` (its state packets stop, commands and video go on), `video` (its stream stops). A run passes when
+the episode ends `link_lost`, the watchdog's first `land` left within the cut's limit of the death (2 s; the video
+3 s, its silence limit being 2), and no more moves are recorded as executed than the emulator had received when
+the link was cut (every step asked after it: nothing executed). Prints each run, the median and the maximum time
+to `land`, and the machine; writes the tables to bench/results/link_loss.md. The exit code is 1 if any run failed.
 
-    .venv/bin/python bench/link_loss.py [--runs 10] [--seed 0]
+    .venv/bin/python bench/link_loss.py [--runs 10] [--seed 0] [--cuts link,state,video]
     .venv/bin/python bench/link_loss.py --smoke      # 2 runs (tests/chaos/test_chaos_tello.py calls it)
 """
 
@@ -39,7 +40,7 @@ from vlnpilot.robots.tello_config import load_tello_config  # noqa: E402
 from vlnpilot.tasks.task import parse_query  # noqa: E402
 
 LOOPBACK = "127.0.0.1"
-LAND_WITHIN_S = 2.0
+LAND_WITHIN_S = {"link": 2.0, "state": 2.0, "video": 3.0}  # the cut's silence limit and a second to spare
 MOVES = ("B1", "A2", "B2", "A1")  # all allowed while searching an object; no reversal for the guard to veto
 MAX_KILL_STEP, MAX_DELAY_S = 6, 1.5
 PILOT_VERBS = ("forward", "cw", "ccw")  # the SDK commands of MOVES (A1 is an rc pulse)
@@ -71,8 +72,8 @@ class Killer:
 
     name, model, privileged = "link-killer", "link-killer-1", False
 
-    def __init__(self, emulator: TelloEmulator, step: int, delay_s: float):
-        self.emulator, self.step, self.delay_s = emulator, step, delay_s
+    def __init__(self, emulator: TelloEmulator, step: int, delay_s: float, cut: str = "link"):
+        self.emulator, self.step, self.delay_s, self.cut = emulator, step, delay_s, cut
         self.death: float | None = None
         self.received_at_death = 0
         self.asked: list[float] = []
@@ -88,11 +89,17 @@ class Killer:
         time.sleep(self.delay_s)
         self.death = time.monotonic()  # before close: the state and video threads stop within 0.1 s after it
         self.received_at_death = motions(list(self.emulator.log.received))
-        self.emulator.close()
+        if self.cut == "video":
+            self.emulator.video.stop()
+        elif self.cut == "state":
+            self.emulator.faults.state_silent = True
+        else:
+            self.emulator.close()
 
 
 @dataclass
 class Run:
+    cut: str
     kill_step: int
     delay_s: float
     outcome: str
@@ -101,14 +108,18 @@ class Run:
     recorded_moves: int
     moves_at_death: int
     executed_after: int  # steps asked after the death that are recorded as executed
+    moves_received: int  # by the emulator in all: with one channel cut, commands still reach it
 
     @property
     def ok(self) -> bool:
-        return (self.outcome == "link_lost" and self.to_land_s is not None and self.to_land_s <= LAND_WITHIN_S
-                and self.recorded_moves <= self.moves_at_death and self.executed_after == 0)
+        landed = (self.outcome == "link_lost" and self.to_land_s is not None
+                  and self.to_land_s <= LAND_WITHIN_S[self.cut])
+        if self.cut != "link":  # commands still reach the drone until the watchdog lands it: no move it did not get
+            return landed and self.recorded_moves <= self.moves_received
+        return landed and self.recorded_moves <= self.moves_at_death and self.executed_after == 0
 
 
-def fly(kill_step: int, delay_s: float) -> Run:
+def fly(kill_step: int, delay_s: float, cut: str = "link") -> Run:
     local_port, state_port = local_ports()
     emu_cfg = EmulatorConfig(host=LOOPBACK, port=free_port(), state_port=state_port, video_port=free_port())
     emu = TelloEmulator("cabin", emu_cfg, spawn="living_room")
@@ -116,7 +127,7 @@ def fly(kill_step: int, delay_s: float) -> Run:
     config = load_tello_config(host=host, command_port=port, local_port=local_port, state_port=state_port,
                                video_port=emu_cfg.video_port)
     env = TelloEnv("cabin", config, handle_sigint=False, operator=ConsoleOperator(io.StringIO(), io.StringIO()))
-    killer = Killer(emu, kill_step, delay_s)
+    killer = Killer(emu, kill_step, delay_s, cut)
     records: list[dict] = []
     try:
         task = parse_query("Go to the bedroom", env.scene)
@@ -131,23 +142,24 @@ def fly(kill_step: int, delay_s: float) -> Run:
     recorded = sum(1 for r in records if r["executed"] not in (None, "E"))
     after = sum(1 for r, t in zip(records, killer.asked, strict=False)
                 if death is not None and t > death and r["executed"] not in (None, "E"))
-    return Run(kill_step, round(delay_s, 2), result.outcome, result.steps, to_land, recorded,
-               killer.received_at_death, after)
+    return Run(cut, kill_step, round(delay_s, 2), result.outcome, result.steps, to_land, recorded,
+               killer.received_at_death, after, motions(list(emu.log.received)))
 
 
-def table(runs: list[Run], seed: int) -> str:
-    lines = ["| run | kill step | delay (s) | outcome | steps | land after death (s) | moves recorded / sent "
-             "at death | executed after death | ok |", "|---|---|---|---|---|---|---|---|---|"]
+def table(runs: list[Run], seed: int, cut: str) -> str:
+    lines = [f"### Cut: `{cut}`", "", "| run | cut at step | delay (s) | outcome | steps | land after the cut (s) | "
+             "moves recorded / sent at the cut / received in all | executed after the cut | ok |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for i, r in enumerate(runs, 1):
         land = "-" if r.to_land_s is None else f"{r.to_land_s:.2f}"
         lines.append(f"| {i} | {r.kill_step} | {r.delay_s:.2f} | {r.outcome} | {r.steps} | {land} | "
-                     f"{r.recorded_moves} / {r.moves_at_death} | {r.executed_after} | {'yes' if r.ok else 'NO'} |")
+                     f"{r.recorded_moves} / {r.moves_at_death} / {r.moves_received} | {r.executed_after} | "
+                     f"{'yes' if r.ok else 'NO'} |")
     times = [r.to_land_s for r in runs if r.to_land_s is not None]
     median = f"{statistics.median(times):.2f}" if times else "-"
     worst = f"{max(times):.2f}" if times else "-"
-    lines += ["", f"{len(runs)} runs (seed {seed}): {sum(r.ok for r in runs)} passed; time from the link's death "
-              f"to `land`: median {median} s, max {worst} s (limit {LAND_WITHIN_S:g} s).", "",
-              f"Machine: {describe()}.", ""]
+    lines += ["", f"{len(runs)} runs (seed {seed}): {sum(r.ok for r in runs)} passed; time from the cut "
+              f"to `land`: median {median} s, max {worst} s (limit {LAND_WITHIN_S[cut]:g} s).", ""]
     return "\n".join(lines)
 
 
@@ -155,16 +167,25 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=int, default=10)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--cuts", default="link,state,video", help="which channels to cut: link, state, video")
     parser.add_argument("--smoke", action="store_true", help="2 runs, nothing written (for a test)")
     parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "link_loss.md")
     args = parser.parse_args(argv)
-    rng = random.Random(args.seed)
+    cuts = [c.strip() for c in args.cuts.split(",") if c.strip()]
+    unknown = sorted(set(cuts) - set(LAND_WITHIN_S))
+    if unknown or not cuts:
+        print(f"unknown cut {', '.join(unknown) or '(none)'}; valid cuts: {', '.join(LAND_WITHIN_S)}", file=sys.stderr)
+        return 2
     count = 2 if args.smoke else args.runs
-    plan = [(rng.randint(1, MAX_KILL_STEP), rng.uniform(0.0, MAX_DELAY_S)) for _ in range(count)]
-    runs = [fly(step, delay) for step, delay in plan]
-    text = table(runs, args.seed)
-    publish(text, args.out, smoke=args.smoke)
-    return 0 if all(r.ok for r in runs) else 1
+    tables, passed = [], True
+    for cut in ["link"] if args.smoke else cuts:
+        rng = random.Random(args.seed)  # the same steps and delays for every cut
+        plan = [(rng.randint(1, MAX_KILL_STEP), rng.uniform(0.0, MAX_DELAY_S)) for _ in range(count)]
+        runs = [fly(step, delay, cut) for step, delay in plan]
+        tables.append(table(runs, args.seed, cut))
+        passed = passed and all(r.ok for r in runs)
+    publish("\n".join(tables) + f"\nMachine: {describe()}.\n", args.out, smoke=args.smoke)
+    return 0 if passed else 1
 
 
 if __name__ == "__main__":
