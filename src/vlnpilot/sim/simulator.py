@@ -49,6 +49,7 @@ from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
 MOVER_TICK_M = 0.05  # a scenario's movers move at most this far between two contact checks
+JITTER_DRAWS = 8  # spawn jitter draws tried before the unjittered spawn (a draw may touch a wall or a door)
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,7 @@ class SimConfig:
     substep_m: float = 0.02
     substep_deg: float = 4.0
     bisect_iterations: int = 6
-    spawn_jitter_m: float = 0.0  # seeded random offset of the spawn position (per repetition variety)
+    spawn_jitter_m: float = 0.0  # seeded random offset of the spawn position (per repetition variety; `_jittered`)
     spawn_jitter_deg: float = 0.0
     shadows: bool = False  # MuJoCo's shadow map costs ~10x a frame on a CPU
     visibility_width: int = 160  # segmentation render used by the ground truth
@@ -378,14 +379,11 @@ class Simulator:
         self.seed = seed
         self._rng = np.random.default_rng(seed)
         self._range_rng = np.random.default_rng([0 if seed is None else seed, 23])  # apart: spawns stay as seeded
-        cfg = self.config
-        if cfg.spawn_jitter_m or cfg.spawn_jitter_deg:
-            dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
-            dyaw = self._rng.uniform(-cfg.spawn_jitter_deg, cfg.spawn_jitter_deg)
-            pose = replace(pose, x=pose.x + dx, y=pose.y + dy, yaw_deg=pose.yaw_deg + dyaw)
+        if self.events is not None:
+            self.events.reset(seed)  # before the jitter: a jittered pose is checked against the scenario's bodies
+        pose = self._jittered(pose)
         fired: tuple[FiredEvent, ...] = ()
         if self.events is not None:
-            self.events.reset(seed)
             fired = self.events.due(0, self.scene.room_at(pose.x, pose.y))
         hit = self.contact_at(pose)
         if hit is not None:
@@ -396,6 +394,20 @@ class Simulator:
         exposure = self.randomization.exposure_gain if self.randomization is not None else 1.0
         self.camera.reset(seed, exposure, world=self.config.randomize)
         return self._observe(collided=False, contact=None, fired=fired)
+
+    def _jittered(self, pose: Pose) -> Pose:
+        """`pose` moved by the seeded spawn jitter: the first free draw of up to JITTER_DRAWS (so a seed whose first
+        draw was free keeps its pose), else `pose` itself. The yaw stays in (-180, 180]."""
+        cfg = self.config
+        if not (cfg.spawn_jitter_m or cfg.spawn_jitter_deg):
+            return pose
+        for _ in range(JITTER_DRAWS):
+            dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
+            dyaw = self._rng.uniform(-cfg.spawn_jitter_deg, cfg.spawn_jitter_deg)
+            moved = replace(pose, x=pose.x + dx, y=pose.y + dy, yaw_deg=wrap_deg(pose.yaw_deg + dyaw))
+            if self.contact_at(moved) is None:
+                return moved
+        return pose
 
     def step(self, command: Command | str) -> Observation:
         """Execute one command of the table (A1...E) and observe."""
