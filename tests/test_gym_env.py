@@ -115,6 +115,18 @@ def test_bad_options_are_refused():
         gym_env.CabinEnv(width=W, height=H, render_mode="human")
 
 
+@pytest.mark.parametrize("env_id", [gym_env.ENV_ID, gym_env.HOUSE_ENV_ID])
+def test_a_closed_environment_refuses_to_step_reset_or_render(env_id: str) -> None:
+    """The cabin quietly opened new renderers and flew on; the house built a new simulator and asked for a reset."""
+    env = gym.make(env_id, width=32, height=24, render_mode="rgb_array")
+    env.reset(seed=1)
+    env.close()
+    env.close()  # a second close is fine
+    for call in (lambda: env.step(0), lambda: env.reset(seed=1), env.render):
+        with pytest.raises(gym.error.ClosedEnvironmentError, match="the environment is closed"):
+            call()
+
+
 def test_gymnasium_finds_the_ids_from_the_module_named_in_the_id() -> None:
     """`gym.make("vlnpilot.sim.gym_env:VLNPilot/Cabin-v0")` works in a fresh process, nothing imported first."""
     import subprocess

@@ -24,6 +24,7 @@ from vlnpilot.sim.simulator import SimConfig, Simulator
 ENV_ID = "VLNPilot/Cabin-v0"
 HOUSE_ENV_ID = "VLNPilot/House-v0"
 GOAL_REWARD, COLLISION_REWARD, STEP_REWARD = 1.0, -1.0, -0.01
+CLOSED = "the environment is closed: make a new one (close() ends it for good)"
 
 
 def front_shape(config: SimConfig) -> tuple[int, int, int]:
@@ -81,6 +82,7 @@ class CabinEnv(gym.Env):
         self._last: Observation | None = None
         self._steps = 0
         self._episode_goal: str | None = self.goal_room
+        self._closed = False
 
     # -- options --------------------------------------------------------------------------------------
     def _resolve_spawn(self, spawn: str | Spawn | Pose | None) -> Spawn | Pose:
@@ -105,6 +107,7 @@ class CabinEnv(gym.Env):
 
     # -- Gymnasium API ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._check_open()
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"spawn", "goal_room"}
@@ -118,6 +121,7 @@ class CabinEnv(gym.Env):
         return self._obs(self._last), self._info(self._last)
 
     def step(self, action):
+        self._check_open()
         if self._last is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         if not self.action_space.contains(action):
@@ -136,6 +140,7 @@ class CabinEnv(gym.Env):
         return self._obs(obs), reward, terminated, truncated, self._info(obs, room)
 
     def render(self):
+        self._check_open()
         if self.render_mode != "rgb_array":
             return None
         if self._last is None:
@@ -143,7 +148,13 @@ class CabinEnv(gym.Env):
         return self._last.rear_rgb
 
     def close(self) -> None:
+        """Free the renderers; the environment is then closed for good (a second close() does nothing)."""
         self.sim.close()
+        self._closed = True
+
+    def _check_open(self) -> None:
+        if self._closed:  # the simulator would quietly open new renderers
+            raise gym.error.ClosedEnvironmentError(CLOSED)
 
     # -- helpers ------------------------------------------------------------------------------------------
     def _obs(self, obs: Observation) -> dict[str, Any]:
