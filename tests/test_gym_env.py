@@ -115,6 +115,15 @@ def test_bad_options_are_refused():
         gym_env.CabinEnv(width=W, height=H, render_mode="human")
 
 
+@pytest.mark.parametrize("options", [{}, {"camera": "tello"}, {"randomize": 3}], ids=["ideal", "tello", "randomised"])
+def test_the_front_frame_is_the_callers_to_write_into(options: dict[str, object]) -> None:
+    """The Tello camera's frames (and a randomised world's) were read-only; MuJoCo's render is the caller's."""
+    with gym_env.CabinEnv(width=W, height=H, **options) as e:
+        frames = [e.reset(seed=1)[0]["front"], e.step(ACTION["A1"])[0]["front"]]
+        assert e._last is not None and np.array_equal(frames[-1], e._last.front_rgb)  # the very frame, bit for bit
+    assert all(frame.flags.writeable for frame in frames)
+
+
 @pytest.mark.parametrize("env_id", [gym_env.ENV_ID, gym_env.HOUSE_ENV_ID])
 def test_a_closed_environment_refuses_to_step_reset_or_render(env_id: str) -> None:
     """The cabin quietly opened new renderers and flew on; the house built a new simulator and asked for a reset."""
