@@ -145,3 +145,27 @@ def test_gymnasium_finds_the_ids_from_the_module_named_in_the_id() -> None:
             "print(e.spec.id); e.close()")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.strip() == "VLNPilot/House-v0"
+
+
+@pytest.mark.parametrize("imports", ["import vlnpilot; import gymnasium as gym",
+                                     "import gymnasium as gym; import vlnpilot"], ids=["vlnpilot-first", "gym-first"])
+def test_import_vlnpilot_registers_the_ids_in_either_order(imports: str) -> None:
+    """Gymnasium 1.x reads no entry points: `import vlnpilot` registers the ids, importing neither MuJoCo nor (when
+    it is not loaded yet) Gymnasium; `gym.make` then loads the environment."""
+    import subprocess
+    import sys
+
+    code = (f"import sys; {imports}; loaded = sorted({{'gymnasium', 'mujoco'}} & set(sys.modules)); "
+            "e = gym.make('VLNPilot/Cabin-v0', width=32, height=24); e.reset(seed=0); e.close(); "
+            "print(loaded, sorted(i for i in gym.registry if i.startswith('VLNPilot/')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "['gymnasium'] ['VLNPilot/Cabin-v0', 'VLNPilot/House-v0']"
+
+
+def test_import_vlnpilot_alone_loads_no_gymnasium() -> None:
+    import subprocess
+    import sys
+
+    code = "import sys, vlnpilot; print(sorted({'gymnasium', 'mujoco', 'numpy'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

@@ -1,6 +1,6 @@
 """Gymnasium environment `VLNPilot/Cabin-v0`: the embedded simulator for reinforcement-learning users.
 
-Importing this module registers the id, so `gymnasium.make("VLNPilot/Cabin-v0")` works afterwards.
+`import vlnpilot` registers the ids (`vlnpilot.GYM_ENVS`), so `gymnasium.make("VLNPilot/Cabin-v0")` works afterwards.
 Actions index the command table (`commands.COMMANDS`, in its order); observations are a dict of the front
 image, the pose and the collision flag. Episodes end with `terminated` on reaching the goal room (+1) or on a
 collision (-1), and with `truncated` (never both) when `max_steps` steps have been taken.
@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from vlnpilot import register_gym_envs
 from vlnpilot.core.commands import COMMANDS, Command
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.ranging import RangeSensor
@@ -194,12 +195,5 @@ def ranges_space(sensor: RangeSensor | None) -> dict[str, spaces.Box]:
     return {"ranges": spaces.Box(np.full(n, -1.0, np.float32), np.full(n, sensor.max_m, np.float32), (n,), np.float32)}
 
 
-def register() -> None:
-    """Register `VLNPilot/Cabin-v0` and `VLNPilot/House-v0` (procedural houses) with Gymnasium (idempotent)."""
-    if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="vlnpilot.sim.gym_env:CabinEnv", kwargs={"scene": "cabin"})
-    if HOUSE_ENV_ID not in gym.registry:
-        gym.register(id=HOUSE_ENV_ID, entry_point="vlnpilot.sim.house_env:HouseEnv")
-
-
-register()
+register = register_gym_envs
+register()  # `import vlnpilot` did, unless another import hook took Gymnasium's import first (idempotent)
