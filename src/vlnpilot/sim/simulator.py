@@ -27,7 +27,7 @@ from vlnpilot.core.tello_spec import motion_duration_s  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, check_detail  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
-from vlnpilot.sim import drone  # noqa: E402
+from vlnpilot.sim import drone, gl_fork  # noqa: E402
 from vlnpilot.sim.camera_model import (  # noqa: E402
     STILL,
     GLPixels,
@@ -517,11 +517,15 @@ class Simulator:
     def _renderer(self, width: int, height: int) -> mujoco.Renderer:
         key = (width, height)
         if key not in self._renderers:
-            try:
-                self._renderers[key] = mujoco.Renderer(self.model, height, width)
-            except Exception as exc:  # the GL stack raises many kinds; report one clear error
-                raise gl.backend_error(exc) from exc
+            self._renderers[key] = self._new_renderer(width, height)
         return self._renderers[key]
+
+    def _new_renderer(self, width: int, height: int) -> mujoco.Renderer:
+        gl_fork.opening_renderer()  # refused, in one line, in a child forked with live GL state (it would hang)
+        try:
+            return mujoco.Renderer(self.model, height, width)
+        except Exception as exc:  # the GL stack raises many kinds; report one clear error
+            raise gl.backend_error(exc) from exc
 
     def render(self, camera: str = drone.FRONT_CAMERA, width: int | None = None, height: int | None = None,
                depth: bool = False) -> np.ndarray:
@@ -576,10 +580,7 @@ class Simulator:
         """Per-pixel geom ids (-1 for background) of a low-resolution render, for visibility queries."""
         cfg = self.config
         if self._seg_renderer is None:
-            try:
-                self._seg_renderer = mujoco.Renderer(self.model, cfg.visibility_height, cfg.visibility_width)
-            except Exception as exc:
-                raise gl.backend_error(exc) from exc
+            self._seg_renderer = self._new_renderer(cfg.visibility_width, cfg.visibility_height)
             self._seg_renderer.enable_segmentation_rendering()
         self._sync()
         self._seg_renderer.update_scene(self.data, camera=camera)
