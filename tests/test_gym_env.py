@@ -115,6 +115,27 @@ def test_bad_options_are_refused():
         gym_env.CabinEnv(width=W, height=H, render_mode="human")
 
 
+@pytest.mark.parametrize("options", [{}, {"camera": "tello"}, {"randomize": 3}], ids=["ideal", "tello", "randomised"])
+def test_the_front_frame_is_the_callers_to_write_into(options: dict[str, object]) -> None:
+    """The Tello camera's frames (and a randomised world's) were read-only; MuJoCo's render is the caller's."""
+    with gym_env.CabinEnv(width=W, height=H, **options) as e:
+        frames = [e.reset(seed=1)[0]["front"], e.step(ACTION["A1"])[0]["front"]]
+        assert e._last is not None and np.array_equal(frames[-1], e._last.front_rgb)  # the very frame, bit for bit
+    assert all(frame.flags.writeable for frame in frames)
+
+
+@pytest.mark.parametrize("env_id", [gym_env.ENV_ID, gym_env.HOUSE_ENV_ID])
+def test_a_closed_environment_refuses_to_step_reset_or_render(env_id: str) -> None:
+    """The cabin quietly opened new renderers and flew on; the house built a new simulator and asked for a reset."""
+    env = gym.make(env_id, width=32, height=24, render_mode="rgb_array")
+    env.reset(seed=1)
+    env.close()
+    env.close()  # a second close is fine
+    for call in (lambda: env.step(0), lambda: env.reset(seed=1), env.render):
+        with pytest.raises(gym.error.ClosedEnvironmentError, match="the environment is closed"):
+            call()
+
+
 def test_gymnasium_finds_the_ids_from_the_module_named_in_the_id() -> None:
     """`gym.make("vlnpilot.sim.gym_env:VLNPilot/Cabin-v0")` works in a fresh process, nothing imported first."""
     import subprocess
@@ -124,3 +145,27 @@ def test_gymnasium_finds_the_ids_from_the_module_named_in_the_id() -> None:
             "print(e.spec.id); e.close()")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
     assert out.stdout.strip() == "VLNPilot/House-v0"
+
+
+@pytest.mark.parametrize("imports", ["import vlnpilot; import gymnasium as gym",
+                                     "import gymnasium as gym; import vlnpilot"], ids=["vlnpilot-first", "gym-first"])
+def test_import_vlnpilot_registers_the_ids_in_either_order(imports: str) -> None:
+    """Gymnasium 1.x reads no entry points: `import vlnpilot` registers the ids, importing neither MuJoCo nor (when
+    it is not loaded yet) Gymnasium; `gym.make` then loads the environment."""
+    import subprocess
+    import sys
+
+    code = (f"import sys; {imports}; loaded = sorted({{'gymnasium', 'mujoco'}} & set(sys.modules)); "
+            "e = gym.make('VLNPilot/Cabin-v0', width=32, height=24); e.reset(seed=0); e.close(); "
+            "print(loaded, sorted(i for i in gym.registry if i.startswith('VLNPilot/')))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "['gymnasium'] ['VLNPilot/Cabin-v0', 'VLNPilot/House-v0']"
+
+
+def test_import_vlnpilot_alone_loads_no_gymnasium() -> None:
+    import subprocess
+    import sys
+
+    code = "import sys, vlnpilot; print(sorted({'gymnasium', 'mujoco', 'numpy'} & set(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"

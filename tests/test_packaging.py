@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import os
 import re
+import shutil
 import subprocess
 import sys
+import tarfile
 import tomllib
 from importlib.metadata import version
 from pathlib import Path
 
+import pytest
 import yaml
 
 import vlnpilot
@@ -41,3 +44,24 @@ def test_the_licence_and_the_citation() -> None:
     assert paper["title"] == "VLN-Pilot: Large Vision-Language Model as an Autonomous Indoor Drone Operator"
     assert [a["family-names"] for a in paper["authors"]] == ["Dominguez-Dager", "Suescun-Ferrandiz", "Escalona",
                                                            "Gomez-Donoso", "Cazorla"]
+
+
+def test_the_sdist_ships_the_package_and_no_tests(tmp_path: Path) -> None:
+    """setuptools adds tests/test*.py to an sdist by default: they shipped without conftest.py, tests/fakes/ or the
+    docs, bench and trials files they read. MANIFEST.in keeps every test out (the sdist built from the files git
+    tracks, with the build backend pyproject.toml names)."""
+    setuptools = pytest.importorskip("setuptools")
+    if int(setuptools.__version__.split(".")[0]) < 77:
+        pytest.skip(f"setuptools {setuptools.__version__} predates pyproject's license string (77): make venv")
+    tree, out = tmp_path / "tree", tmp_path / "out"
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout
+    for name in tracked.decode().split("\0"):
+        if name and (ROOT / name).is_file():
+            (tree / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, tree / name)
+    code = f"from setuptools import build_meta; print(build_meta.build_sdist({str(out)!r}))"
+    built = subprocess.run([sys.executable, "-c", code], cwd=tree, capture_output=True, text=True, check=True)
+    with tarfile.open(out / built.stdout.strip().splitlines()[-1]) as sdist:
+        names = [n.split("/", 1)[1] for n in sdist.getnames() if "/" in n]
+    assert "src/vlnpilot/sim/gym_env.py" in names and "pyproject.toml" in names
+    assert [n for n in names if n.startswith("tests")] == []

@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -199,3 +203,45 @@ def test_default_run_dir_is_a_safe_name() -> None:
 def test_ground_truth_protocol_is_what_the_simulator_offers(small_sim: Simulator) -> None:
     assert isinstance(small_sim.ground_truth(), GroundTruth)
 
+
+
+# -- provenance: the git commit ----------------------------------------------------------------------------------
+ROOT = Path(__file__).resolve().parents[1]
+GIT = ["git", "-c", "user.name=t", "-c", "user.email=t@example.org", "-c", "commit.gpgsign=false"]
+
+
+def _committed_repository(root: Path) -> str:
+    """`root` as a git repository with everything in it committed; its HEAD."""
+    for args in (["init", "-q"], ["add", "-A"], ["commit", "-qm", "the user's own work"]):
+        subprocess.run([*GIT, "-C", str(root), *args], check=True, capture_output=True)
+    return subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def _recorded_sha(site_packages: Path) -> str:
+    code = "from vlnpilot.core.rundir import git_sha; print(git_sha())"
+    env = {**os.environ, "PYTHONPATH": str(site_packages)}
+    return subprocess.run([sys.executable, "-c", code], env=env, check=True, capture_output=True,
+                          text=True).stdout.strip()
+
+
+def test_a_wheel_inside_the_users_own_repository_records_no_git_sha(tmp_path: Path) -> None:
+    """The package installed in a virtual environment inside another repository: that repository's HEAD is not the
+    code's commit (it was recorded as such)."""
+    site_packages = tmp_path / ".venv" / "lib" / "site-packages"
+    shutil.copytree(ROOT / "src" / "vlnpilot", site_packages / "vlnpilot",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    (tmp_path / "pyproject.toml").write_text('[project]\nname = "vln-pilot"\n')  # even a namesake
+    users_head = _committed_repository(tmp_path)
+    assert _recorded_sha(site_packages) == "unknown" != users_head
+
+
+def test_a_checkout_records_its_head_and_whether_it_has_changes(tmp_path: Path) -> None:
+    shutil.copytree(ROOT / "src" / "vlnpilot", tmp_path / "src" / "vlnpilot",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copy(ROOT / "pyproject.toml", tmp_path / "pyproject.toml")
+    head = _committed_repository(tmp_path)
+    assert _recorded_sha(tmp_path / "src") == head
+    with (tmp_path / "src" / "vlnpilot" / "__init__.py").open("a") as changed:
+        changed.write("# a local change\n")
+    assert _recorded_sha(tmp_path / "src") == head + "+dirty"

@@ -182,6 +182,48 @@ def test_seeded_spawn_jitter_is_reproducible():
     assert a[0].pose != c[0].pose
 
 
+def _first_jitter_draw(seed: int, metres: float, degrees: float) -> tuple[float, float, float]:
+    """The spawn jitter's first draw for `seed`, as the simulator has always drawn it: dx, dy, then dyaw."""
+    rng = np.random.default_rng(seed)
+    dx, dy = rng.uniform(-metres, metres, 2)
+    return float(dx), float(dy), float(rng.uniform(-degrees, degrees))
+
+
+def test_the_yaw_jitter_keeps_the_spawn_yaw_in_range():
+    """A spawn facing 180 degrees jittered by +-10 stays in (-180, 180] (it reached -186, outside the gym's space)."""
+    facing_west = Pose(2.0, 2.0, 1.0, 180.0)  # the living room, nothing near
+    with Simulator("cabin", SimConfig(render=False, spawn_jitter_deg=10.0)) as jittery:
+        yaws = [jittery.reset(facing_west, seed=seed).pose.yaw_deg for seed in range(10)]
+    assert all(-180.0 < yaw <= 180.0 for yaw in yaws), yaws
+    assert any(yaw < 0 for yaw in yaws) and any(yaw > 0 for yaw in yaws)  # jittered both ways round
+
+
+def test_a_jittered_spawn_that_touches_a_door_is_drawn_again():
+    """Seed 43's first draw puts the bedroom spawn into the bathroom door's leaf: the next free draw serves (reset
+    raised ConfigError); a seed whose first draw was free keeps the pose it always had."""
+    with Simulator("cabin", SimConfig(render=False, spawn_jitter_m=0.3)) as jittery:
+        spawn = jittery.scene.spawn("bedroom").pose
+        dx, dy, _ = _first_jitter_draw(43, 0.3, 0.0)
+        assert jittery.contact_at(Pose(spawn.x + dx, spawn.y + dy, spawn.z, spawn.yaw_deg)) is not None
+        redrawn = jittery.reset("bedroom", seed=43).pose
+        assert redrawn == jittery.reset("bedroom", seed=43).pose  # the same seed, the same pose
+        assert jittery.contact_at(redrawn) is None and redrawn != spawn
+        dx, dy, _ = _first_jitter_draw(42, 0.3, 0.0)
+        assert jittery.reset("bedroom", seed=42).pose == Pose(spawn.x + dx, spawn.y + dy, spawn.z, spawn.yaw_deg)
+
+
+def test_a_spawn_every_jitter_draw_of_which_touches_falls_back_to_the_spawn(monkeypatch: pytest.MonkeyPatch):
+    with Simulator("cabin", SimConfig(render=False, spawn_jitter_m=0.3, spawn_jitter_deg=10.0)) as jittery:
+        spawn = jittery.scene.spawn("bedroom").pose
+        touches_unless_at_spawn = jittery.contact_at
+
+        def contact_at(pose: Pose):
+            return ("wall", "body") if pose != spawn else touches_unless_at_spawn(pose)
+
+        monkeypatch.setattr(jittery, "contact_at", contact_at)
+        assert jittery.reset("bedroom", seed=43).pose == spawn
+
+
 # -- the drone ---------------------------------------------------------------------------------------------------
 def test_tello_size_from_the_collision_geometry(geo_sim):
     m = geo_sim.model

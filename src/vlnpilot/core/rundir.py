@@ -19,6 +19,7 @@ import platform
 import shutil
 import subprocess
 import tempfile
+import tomllib
 import weakref
 from datetime import UTC, datetime
 from importlib import metadata
@@ -81,18 +82,40 @@ def default_run_dir(root: str | Path = "runs", label: str = "run") -> Path:
     return Path(root) / f"{stamp}-{safe}"
 
 
+PACKAGE_DIR = Path(__file__).resolve().parents[1]  # src/vlnpilot in a checkout; site-packages/vlnpilot from a wheel
+
+
 @functools.cache
 def git_sha() -> str:
-    """The git commit of the installed source tree, with '+dirty' when it has local changes."""
-    here = Path(__file__).resolve().parent
+    """The git commit of the VLN-Pilot checkout this code runs from, with '+dirty' when it has local changes;
+    'unknown' without one (a wheel, whatever repository its virtual environment sits in) or without git."""
+    return checkout_sha(PACKAGE_DIR)
+
+
+def checkout_sha(package_dir: Path) -> str:
+    """`git_sha` for the package at `package_dir`."""
     try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5,
-                             check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here,
-                               capture_output=True, text=True, timeout=5).stdout.strip()
-        return sha + ("+dirty" if dirty else "")
+        top = Path(_git(package_dir, "rev-parse", "--show-toplevel"))
+        if not is_vlnpilot_checkout(top, package_dir):  # a wheel in another repository: its HEAD is not ours
+            return "unknown"
+        dirty = _git(top, "status", "--porcelain", "--untracked-files=no")
+        return _git(top, "rev-parse", "HEAD") + ("+dirty" if dirty else "")
     except (OSError, subprocess.SubprocessError):
         return "unknown"
+
+
+def is_vlnpilot_checkout(top: Path, package_dir: Path) -> bool:
+    """Whether the repository at `top` is a VLN-Pilot source tree and `package_dir` its own src/vlnpilot."""
+    try:
+        name = tomllib.loads((top / "pyproject.toml").read_text(encoding="utf-8"))["project"]["name"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return name == "vln-pilot" and package_dir.resolve() == (top / "src" / "vlnpilot").resolve()
+
+
+def _git(cwd: Path, *args: str) -> str:
+    return subprocess.run(["git", *args], cwd=cwd, capture_output=True, text=True, timeout=5,
+                          check=True).stdout.strip()
 
 
 @functools.cache

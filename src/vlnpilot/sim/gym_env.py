@@ -1,6 +1,6 @@
 """Gymnasium environment `VLNPilot/Cabin-v0`: the embedded simulator for reinforcement-learning users.
 
-Importing this module registers the id, so `gymnasium.make("VLNPilot/Cabin-v0")` works afterwards.
+`import vlnpilot` registers the ids (`vlnpilot.GYM_ENVS`), so `gymnasium.make("VLNPilot/Cabin-v0")` works afterwards.
 Actions index the command table (`commands.COMMANDS`, in its order); observations are a dict of the front
 image, the pose and the collision flag. Episodes end with `terminated` on reaching the goal room (+1) or on a
 collision (-1), and with `truncated` (never both) when `max_steps` steps have been taken.
@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from vlnpilot import register_gym_envs
 from vlnpilot.core.commands import COMMANDS, Command
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.ranging import RangeSensor
@@ -24,6 +25,7 @@ from vlnpilot.sim.simulator import SimConfig, Simulator
 ENV_ID = "VLNPilot/Cabin-v0"
 HOUSE_ENV_ID = "VLNPilot/House-v0"
 GOAL_REWARD, COLLISION_REWARD, STEP_REWARD = 1.0, -1.0, -0.01
+CLOSED = "the environment is closed: make a new one (close() ends it for good)"
 
 
 def front_shape(config: SimConfig) -> tuple[int, int, int]:
@@ -81,6 +83,7 @@ class CabinEnv(gym.Env):
         self._last: Observation | None = None
         self._steps = 0
         self._episode_goal: str | None = self.goal_room
+        self._closed = False
 
     # -- options --------------------------------------------------------------------------------------
     def _resolve_spawn(self, spawn: str | Spawn | Pose | None) -> Spawn | Pose:
@@ -105,6 +108,7 @@ class CabinEnv(gym.Env):
 
     # -- Gymnasium API ---------------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._check_open()
         super().reset(seed=seed)
         options = dict(options or {})
         unknown = set(options) - {"spawn", "goal_room"}
@@ -118,6 +122,7 @@ class CabinEnv(gym.Env):
         return self._obs(self._last), self._info(self._last)
 
     def step(self, action):
+        self._check_open()
         if self._last is None:
             raise gym.error.ResetNeeded("call reset() before step()")
         if not self.action_space.contains(action):
@@ -136,6 +141,7 @@ class CabinEnv(gym.Env):
         return self._obs(obs), reward, terminated, truncated, self._info(obs, room)
 
     def render(self):
+        self._check_open()
         if self.render_mode != "rgb_array":
             return None
         if self._last is None:
@@ -143,14 +149,20 @@ class CabinEnv(gym.Env):
         return self._last.rear_rgb
 
     def close(self) -> None:
+        """Free the renderers; the environment is then closed for good (a second close() does nothing)."""
         self.sim.close()
+        self._closed = True
+
+    def _check_open(self) -> None:
+        if self._closed:  # the simulator would quietly open new renderers
+            raise gym.error.ClosedEnvironmentError(CLOSED)
 
     # -- helpers ------------------------------------------------------------------------------------------
     def _obs(self, obs: Observation) -> dict[str, Any]:
         p = obs.pose
         ranges = {"ranges": np.array([-1.0 if r.metres is None else r.metres for r in self.sim.ranges()], np.float32)}
         return {
-            "front": obs.front_rgb,
+            "front": writable(obs.front_rgb),
             "pose": np.array([p.x, p.y, p.z, p.yaw_deg], np.float32),
             "collided": int(bool(obs.collided)),  # None (no contact sensing) counts as no collision
             **(ranges if self.sim.range_sensor is not None else {}),
@@ -168,6 +180,13 @@ class CabinEnv(gym.Env):
         }
 
 
+def writable(frame: np.ndarray) -> np.ndarray:
+    """`frame` if its reader may write into it (MuJoCo's renders), else a copy of it: the camera model's frames are
+    read-only views of Pillow's bytes. Copied here, for Gymnasium, and not in the simulator, whose step
+    (bench/camera_cost.py) has no use for it: ~0.5 ms of a 960x720 frame."""
+    return frame if frame.flags.writeable else frame.copy()
+
+
 def ranges_space(sensor: RangeSensor | None) -> dict[str, spaces.Box]:
     """The "ranges" observation of a drone with range sensors (one value per beam, -1: beyond range), else none."""
     if sensor is None:
@@ -176,12 +195,5 @@ def ranges_space(sensor: RangeSensor | None) -> dict[str, spaces.Box]:
     return {"ranges": spaces.Box(np.full(n, -1.0, np.float32), np.full(n, sensor.max_m, np.float32), (n,), np.float32)}
 
 
-def register() -> None:
-    """Register `VLNPilot/Cabin-v0` and `VLNPilot/House-v0` (procedural houses) with Gymnasium (idempotent)."""
-    if ENV_ID not in gym.registry:
-        gym.register(id=ENV_ID, entry_point="vlnpilot.sim.gym_env:CabinEnv", kwargs={"scene": "cabin"})
-    if HOUSE_ENV_ID not in gym.registry:
-        gym.register(id=HOUSE_ENV_ID, entry_point="vlnpilot.sim.house_env:HouseEnv")
-
-
-register()
+register = register_gym_envs
+register()  # `import vlnpilot` did, unless another import hook took Gymnasium's import first (idempotent)

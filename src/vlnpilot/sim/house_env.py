@@ -17,7 +17,7 @@ from gymnasium import spaces
 from vlnpilot.core.commands import COMMANDS
 from vlnpilot.core.ranging import range_sensor
 from vlnpilot.scene.houses import SEEDS, HouseSpec
-from vlnpilot.sim.gym_env import CabinEnv, front_shape, ranges_space
+from vlnpilot.sim.gym_env import CLOSED, CabinEnv, front_shape, ranges_space
 from vlnpilot.sim.simulator import SimConfig
 
 MAX_EXTENT_M = 40.0  # bound of the pose observation: larger than any generated house
@@ -35,6 +35,7 @@ class HouseEnv(gym.Env):
                                         "randomize": randomize, "detail": detail}
         self.render_mode = render_mode
         self._env: CabinEnv | None = None
+        self._closed = False
         self.action_space = spaces.Discrete(len(COMMANDS))
         low = np.array([-1.0, -1.0, 0.0, -180.0], np.float32)
         high = np.array([MAX_EXTENT_M, MAX_EXTENT_M, 3.0, 180.0], np.float32)
@@ -51,6 +52,7 @@ class HouseEnv(gym.Env):
 
     @property
     def env(self) -> CabinEnv:
+        self._check_open()
         if self._env is None or self._env.scene.name != self._spec.name:
             if self._env is not None:
                 self._env.close()
@@ -58,6 +60,7 @@ class HouseEnv(gym.Env):
         return self._env
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        self._check_open()
         super().reset(seed=seed)
         if seed is not None:
             self._spec = HouseSpec(int(seed) % SEEDS, self._spec.rooms)  # any Gymnasium seed names a house
@@ -80,6 +83,12 @@ class HouseEnv(gym.Env):
         return self.env.render()
 
     def close(self) -> None:
+        """Free the house's simulator; the environment is then closed for good (a second close() does nothing)."""
         if self._env is not None:
             self._env.close()
             self._env = None
+        self._closed = True
+
+    def _check_open(self) -> None:
+        if self._closed:  # rather than a new house's simulator, whose step would ask for a reset
+            raise gym.error.ClosedEnvironmentError(CLOSED)

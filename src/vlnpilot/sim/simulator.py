@@ -27,7 +27,7 @@ from vlnpilot.core.tello_spec import motion_duration_s  # noqa: E402
 from vlnpilot.scene import Scene, Spawn, load_scene  # noqa: E402
 from vlnpilot.scene.detail import DEFAULT_DETAIL, DETAIL_GROUP, check_detail  # noqa: E402
 from vlnpilot.scene.mjcf import scene_to_mjcf  # noqa: E402
-from vlnpilot.sim import drone  # noqa: E402
+from vlnpilot.sim import drone, gl_fork  # noqa: E402
 from vlnpilot.sim.camera_model import (  # noqa: E402
     STILL,
     GLPixels,
@@ -49,6 +49,7 @@ from vlnpilot.sim.ranging import read_ranges  # noqa: E402
 
 MAX_RESOLUTION = (960, 720)
 MOVER_TICK_M = 0.05  # a scenario's movers move at most this far between two contact checks
+JITTER_DRAWS = 8  # spawn jitter draws tried before the unjittered spawn (a draw may touch a wall or a door)
 
 
 @dataclass(frozen=True)
@@ -64,7 +65,7 @@ class SimConfig:
     substep_m: float = 0.02
     substep_deg: float = 4.0
     bisect_iterations: int = 6
-    spawn_jitter_m: float = 0.0  # seeded random offset of the spawn position (per repetition variety)
+    spawn_jitter_m: float = 0.0  # seeded random offset of the spawn position (per repetition variety; `_jittered`)
     spawn_jitter_deg: float = 0.0
     shadows: bool = False  # MuJoCo's shadow map costs ~10x a frame on a CPU
     visibility_width: int = 160  # segmentation render used by the ground truth
@@ -377,14 +378,11 @@ class Simulator:
         self.seed = seed
         self._rng = np.random.default_rng(seed)
         self._range_rng = np.random.default_rng([0 if seed is None else seed, 23])  # apart: spawns stay as seeded
-        cfg = self.config
-        if cfg.spawn_jitter_m or cfg.spawn_jitter_deg:
-            dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
-            dyaw = self._rng.uniform(-cfg.spawn_jitter_deg, cfg.spawn_jitter_deg)
-            pose = replace(pose, x=pose.x + dx, y=pose.y + dy, yaw_deg=pose.yaw_deg + dyaw)
+        if self.events is not None:
+            self.events.reset(seed)  # before the jitter: a jittered pose is checked against the scenario's bodies
+        pose = self._jittered(pose)
         fired: tuple[FiredEvent, ...] = ()
         if self.events is not None:
-            self.events.reset(seed)
             fired = self.events.due(0, self.scene.room_at(pose.x, pose.y))
         hit = self.contact_at(pose)
         if hit is not None:
@@ -395,6 +393,20 @@ class Simulator:
         exposure = self.randomization.exposure_gain if self.randomization is not None else 1.0
         self.camera.reset(seed, exposure, world=self.config.randomize)
         return self._observe(collided=False, contact=None, fired=fired)
+
+    def _jittered(self, pose: Pose) -> Pose:
+        """`pose` moved by the seeded spawn jitter: the first free draw of up to JITTER_DRAWS (so a seed whose first
+        draw was free keeps its pose), else `pose` itself. The yaw stays in (-180, 180]."""
+        cfg = self.config
+        if not (cfg.spawn_jitter_m or cfg.spawn_jitter_deg):
+            return pose
+        for _ in range(JITTER_DRAWS):
+            dx, dy = self._rng.uniform(-cfg.spawn_jitter_m, cfg.spawn_jitter_m, 2)
+            dyaw = self._rng.uniform(-cfg.spawn_jitter_deg, cfg.spawn_jitter_deg)
+            moved = replace(pose, x=pose.x + dx, y=pose.y + dy, yaw_deg=wrap_deg(pose.yaw_deg + dyaw))
+            if self.contact_at(moved) is None:
+                return moved
+        return pose
 
     def step(self, command: Command | str) -> Observation:
         """Execute one command of the table (A1...E) and observe."""
@@ -504,11 +516,15 @@ class Simulator:
     def _renderer(self, width: int, height: int) -> mujoco.Renderer:
         key = (width, height)
         if key not in self._renderers:
-            try:
-                self._renderers[key] = mujoco.Renderer(self.model, height, width)
-            except Exception as exc:  # the GL stack raises many kinds; report one clear error
-                raise gl.backend_error(exc) from exc
+            self._renderers[key] = self._new_renderer(width, height)
         return self._renderers[key]
+
+    def _new_renderer(self, width: int, height: int) -> mujoco.Renderer:
+        gl_fork.opening_renderer()  # refused, in one line, in a child forked with live GL state (it would hang)
+        try:
+            return mujoco.Renderer(self.model, height, width)
+        except Exception as exc:  # the GL stack raises many kinds; report one clear error
+            raise gl.backend_error(exc) from exc
 
     def render(self, camera: str = drone.FRONT_CAMERA, width: int | None = None, height: int | None = None,
                depth: bool = False) -> np.ndarray:
@@ -563,10 +579,7 @@ class Simulator:
         """Per-pixel geom ids (-1 for background) of a low-resolution render, for visibility queries."""
         cfg = self.config
         if self._seg_renderer is None:
-            try:
-                self._seg_renderer = mujoco.Renderer(self.model, cfg.visibility_height, cfg.visibility_width)
-            except Exception as exc:
-                raise gl.backend_error(exc) from exc
+            self._seg_renderer = self._new_renderer(cfg.visibility_width, cfg.visibility_height)
             self._seg_renderer.enable_segmentation_rendering()
         self._sync()
         self._seg_renderer.update_scene(self.data, camera=camera)
