@@ -133,6 +133,8 @@ def test_a_tello_that_does_not_answer_gives_a_clear_time_out() -> None:
     (["--robot", "drone"], "unknown robot 'drone'; valid robots: sim, tello"),
     (["--judge", "maybe"], "unknown judge 'maybe'; valid judges: ask, none"),
     (["--tello-host", "my-tello"], "--tello-host must be an IP address"),
+    (["--tello-host", "8.8.8.8"], "--tello-host 8.8.8.8 is not on a local network"),  # refused before a packet
+    (["--tello-host", "0.0.0.0"], "--tello-host 0.0.0.0 is not on a local network"),
     (["--robot", "sim", "--tello-host", "127.0.0.1"], "--tello-host applies to --robot tello only"),
 ])
 def test_bad_tello_options_are_one_line_and_exit_2(monkeypatch, capsys, args, words) -> None:

@@ -3,7 +3,6 @@ serving the emulator; the CLI's thin wiring."""
 
 from __future__ import annotations
 
-import ipaddress
 import threading
 from collections.abc import Iterator
 from contextlib import AbstractContextManager, contextmanager
@@ -107,11 +106,9 @@ def check_robot(robot: str, tello_host: str | None) -> str:
     if tello_host is not None and not found.takes_tello_host:
         raise ConfigError(f"--tello-host applies to --robot {_host_robots()} only")
     if tello_host is not None:
-        try:
-            ipaddress.ip_address(tello_host)  # djitellopy matches replies by the sender's address, not a name
-        except ValueError:
-            raise ConfigError(f"--tello-host must be an IP address (a Tello on its own Wi-Fi is 192.168.10.1), "
-                              f"got {tello_host!r}") from None
+        from vlnpilot.robots.tello_config import check_tello_host
+
+        check_tello_host(tello_host, '--tello-host')
     return key
 
 

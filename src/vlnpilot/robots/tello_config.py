@@ -5,12 +5,13 @@ Defaults live in `tello.yaml` beside this module (one source); `VLN_PILOT_TELLO_
 
 from __future__ import annotations
 
+import ipaddress
 import os
 from pathlib import Path
 from typing import Any
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from vlnpilot.core.errors import ConfigError
 
@@ -62,6 +63,25 @@ class TelloConfig(_Strict):
     video_silence_s: float = Field(gt=0, le=3)  # no frame this long in flight: the pilot is blind, land
     land_confirm_s: float = Field(gt=0, le=10)
     ext_tof: bool = False  # a RoboMaster TT (Tello Talent): its open-source controller answers `EXT tof?`
+
+    @field_validator("host")
+    @classmethod
+    def _local_host(cls, host: str) -> str:
+        check_tello_host(host, "host")
+        return host
+
+
+def check_tello_host(host: str, what: str) -> None:
+    """A Tello's address: an IP (djitellopy matches replies by the sender's address, not a name) on a local network
+    (its own Wi-Fi, a router's, or the emulator's loopback): no command of a drone's ever leaves for the internet."""
+    try:
+        address = ipaddress.ip_address(host)
+    except ValueError:
+        raise ConfigError(f"{what} must be an IP address (a Tello on its own Wi-Fi is 192.168.10.1), "
+                          f"got {host!r}") from None
+    if not (address.is_private or address.is_loopback or address.is_link_local) or address.is_unspecified:
+        raise ConfigError(f"{what} {host} is not on a local network: a Tello is at 192.168.10.1 on its own Wi-Fi, "
+                          "at a private address on a router's, or the emulator at 127.0.0.1")
 
 
 def load_tello_config(path: str | Path | None = None, **overrides: Any) -> TelloConfig:
