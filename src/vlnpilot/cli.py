@@ -97,7 +97,7 @@ def scene_render(scene: SceneOpt = "cabin",
     Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
     from PIL import Image
 
-    from vlnpilot.core.rundir import check_writable
+    from vlnpilot.core.rundir import check_not_a_bench, check_not_a_run, check_writable
     from vlnpilot.report.floorplan import save_floorplan
     from vlnpilot.sim import SimConfig, Simulator
 
@@ -106,6 +106,8 @@ def scene_render(scene: SceneOpt = "cabin",
         spawn_id = spawn or sim.scene.spawns[0].id
         sim.scene.spawn(spawn_id)  # validate before creating the output directory
         out_dir = check_writable(out or Path("runs") / f"scene-{sim.scene.name}-{spawn_id}")
+        check_not_a_run(out_dir, "a scene's pictures")
+        check_not_a_bench(out_dir, "a scene's pictures")
         obs = sim.reset(spawn_id)
         Image.fromarray(obs.front_rgb).save(out_dir / "front.png")
         Image.fromarray(obs.rear_rgb).save(out_dir / "rear.png")
@@ -169,7 +171,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.core.exits import check_base_url, exit_code_for
     from vlnpilot.core.fsm import default_profile
     from vlnpilot.core.ranging import forward_range
-    from vlnpilot.core.rundir import claim_run_dir, default_run_dir
+    from vlnpilot.core.rundir import ROBOT_EVENTS, claim_run_dir, default_run_dir
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
@@ -220,7 +222,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
-    with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
+    with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / ROBOT_EVENTS,
                                         operator=operator, sensors=sensors, camera=camera,
                                         camera_lag_ms=camera_lag_ms, randomize=randomize, detail=detail) as env:
         try:

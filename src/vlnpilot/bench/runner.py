@@ -35,7 +35,7 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.exits import shorten
 from vlnpilot.core.fileio import write_atomic
 from vlnpilot.core.fsm import PROFILES
-from vlnpilot.core.rundir import check_writable, default_run_dir, git_sha, package_versions
+from vlnpilot.core.rundir import check_not_a_run, check_writable, default_run_dir, git_sha, package_versions
 from vlnpilot.pilots.ratelimit import share_budgets
 
 _FAIL_FAST = 3  # abort when this many episodes failed before any finished: something systemic is wrong
@@ -268,6 +268,7 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     config = config_of(suite, pilots, settings)
     chash = config_hash(config)
     out = _bench_dir(settings, suite)
+    check_not_a_run(out, "a bench")
     say: Printer = (lambda msg: console.print(msg, highlight=False)) if console is not None else (lambda msg: None)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     with bench_lock(out):
