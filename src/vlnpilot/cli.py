@@ -232,7 +232,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         except KeyboardInterrupt:
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
             raise typer.Exit(130) from None
-    colour = "green" if result.success else "red"
+    colour = "green" if result.success else "yellow" if result.outcome == "declared" else "red"
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
