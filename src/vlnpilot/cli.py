@@ -434,7 +434,8 @@ def _write_episode_report(run_dir: Path, *, video: bool = True) -> Path:
 
     if video:  # first, so that the page links the video
         write_episode_video(run_dir)
-    return write_episode_report(run_dir)
+    return write_episode_report(run_dir, warn=lambda line: err_console.print(f"warning: {escape(line)}",
+                                                                             highlight=False))
 
 
 @app.command("report")

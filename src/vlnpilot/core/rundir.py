@@ -32,6 +32,7 @@ from vlnpilot.core.dirlock import holds_lock, lock_directory, release_directory
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.exits import shorten, undecodable
 from vlnpilot.core.fileio import write_atomic
+from vlnpilot.core.steplog import OnDamage, read_steps
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
 ROBOT_EVENTS = "robot_events.jsonl"  # a real robot's link events, appended by its backend
@@ -231,18 +232,15 @@ def close_open_records(status: str = "interrupted") -> int:
     return len(records)
 
 
-def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """Read a run directory back: (summary, steps). A truncated last line (killed mid-write) is skipped."""
+def load_run(run_dir: str | Path, on_damage: OnDamage | None = None) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Read a run directory back: (summary, steps). A truncated last line (killed mid-write) is skipped; another
+    damaged line is a ConfigError naming it, or skipped and told to `on_damage` (see core/steplog.py)."""
     run_dir = Path(run_dir)
     summary = load_summary(run_dir)
-    steps = []
-    if (run_dir / EPISODE).is_file():
-        for line in (run_dir / EPISODE).read_text().splitlines():
-            try:
-                steps.append(json.loads(line))
-            except json.JSONDecodeError:
-                break
-    return summary, steps
+    path = run_dir / EPISODE
+    if path.is_dir():
+        raise ConfigError(f"{path} is a directory, not a run's steps; restore the file or fly the run again")
+    return summary, read_steps(path, on_damage) if path.is_file() else []
 
 
 def load_summary(run_dir: str | Path) -> dict[str, Any]:

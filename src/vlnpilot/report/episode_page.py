@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -236,13 +236,15 @@ def render_episode_report(ep: Episode, plan_file: str | None, plan: Any | None) 
         entries=[_entry(ep, e, plan) for e in ep.entries], plan=_plan(ep, plan_file, plan),
         prov=prov, cfg=s.get("config") or {}, versions=", ".join(f"{k} {v}" for k, v in
                                                                 (prov.get("versions") or {}).items()),
-        written=time.strftime("%Y-%m-%d %H:%M:%S"))
+        warnings=ep.warnings, written=time.strftime("%Y-%m-%d %H:%M:%S"))
 
 
-def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) -> Path:
+def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None,
+                         warn: Callable[[str], None] | None = None) -> Path:
     """Write `report.html` (and `floorplan.png`) into a run directory; returns the page's path.
 
-    Works on a finished run and on one still running or interrupted (the page shows the steps so far).
+    Works on a finished run and on one still running or interrupted (the page shows the steps so far). What of
+    the recording could not be read is shown on the page and told to `warn` (the command line prints it).
     """
     from vlnpilot.report.plots import episode_plan
 
@@ -255,7 +257,11 @@ def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) 
         (run_dir / FLOORPLAN).write_bytes(plan.png())
     page = render_episode_report(ep, plan_file, plan)
     path = Path(out) if out is not None else run_dir / REPORT
-    return write_atomic(path, page)
+    written = write_atomic(path, page)
+    if warn is not None:
+        for line in ep.warnings:
+            warn(line)
+    return written
 
 
 def _stage_start(ep: Episode, entry: Entry) -> dict[str, Any] | None:

@@ -78,6 +78,7 @@ class Episode:
     steps: list[dict[str, Any]]
     entries: list[Entry]
     scene: Any | None  # vlnpilot.scene.Scene when the scene could be loaded
+    warnings: list[str] = field(default_factory=list)  # what of the recording could not be read (shown on the page)
 
     @property
     def result(self) -> dict[str, Any]:
@@ -208,7 +209,8 @@ def load_scene_or_none(name: str | None) -> Any | None:
 def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
     """Read a run directory into an `Episode` with its timeline (scene loaded by name unless given)."""
     run_dir = Path(run_dir)
-    summary, steps = load_run(run_dir)
+    warnings: list[str] = []
+    summary, steps = load_run(run_dir, on_damage=warnings.append)  # a damaged line is skipped, and said
     if scene is None:
         scene = load_scene_or_none(summary.get("scene"))
     prev_frames = summary.get("start_frames") or {"front": "frames/front_000.jpg", "rear": "frames/rear_000.jpg"}
@@ -246,7 +248,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
         room_true=_room_at(scene, end_pose) or result.get("final_room") or last.get("room_true"),
         oscillation=False, interventions=[], frames=_existing(run_dir, prev_frames), movers=prev_movers,
     ))
-    return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene)
+    return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene, warnings=warnings)
 
 
 def finite(value: Any) -> bool:
