@@ -444,15 +444,18 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
            ) -> None:
     """Write report.html (and the episode video) for a recorded run, or the report of a bench directory."""
     from vlnpilot.core.errors import ConfigError
+    from vlnpilot.core.fileio import check_not_directories
 
     if not run_dir.is_dir():
         raise ConfigError(f"{run_dir} is not a directory; give a run directory (with summary.json) or a bench "
                           "directory (with results.jsonl)")
     if (run_dir / "results.jsonl").is_file() and not (run_dir / "summary.json").is_file():
+        check_not_directories(run_dir, ("report.html",))
         path = _write_bench_report(run_dir)
     else:
         if not (run_dir / "summary.json").is_file():
             raise ConfigError(f"{run_dir} is not a run directory: summary.json is missing")
+        check_not_directories(run_dir, ("report.html", "floorplan.png", "episode.mp4", "episode.gif"))
         path = _write_episode_report(run_dir, video=video)
     console.print(f"wrote {escape(str(path))}")
 

@@ -14,6 +14,7 @@ decisions, poses and images are written.
 from __future__ import annotations
 
 import functools
+import io
 import json
 import platform
 import shutil
@@ -186,7 +187,9 @@ class Recorder:
         for key, img in (("front", front), ("rear", rear)):
             if img.size > 3:  # observations of a render-less simulator carry 1x1 placeholders
                 path = self.frame_paths(step)[key]
-                Image.fromarray(img).save(self.run_dir / path, quality=self.jpeg_quality)
+                jpeg = io.BytesIO()
+                Image.fromarray(img).save(jpeg, format="JPEG", quality=self.jpeg_quality)
+                write_atomic(self.run_dir / path, jpeg.getvalue())  # a kill mid-write never leaves a torn frame
                 written[key] = path
         return written
 
@@ -260,4 +263,14 @@ def load_summary(run_dir: str | Path) -> dict[str, Any]:
 def load_trial(run_dir: str | Path) -> dict[str, Any]:
     """A trial's metadata (trial.json), or {} for a plain run."""
     path = Path(run_dir) / TRIAL
-    return json.loads(path.read_text()) if path.is_file() else {}
+    if path.is_dir():
+        raise ConfigError(f"{path} is a directory, not a trial's metadata; remove it or restore the file")
+    if not path.is_file():
+        return {}
+    try:
+        trial = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path} is not valid JSON ({exc}); restore it (trials/README.md)") from None
+    if not isinstance(trial, dict):
+        raise ConfigError(f"{path} holds a {type(trial).__name__}, not a trial's metadata (a JSON object)")
+    return trial
