@@ -228,9 +228,9 @@ def render_episode_report(ep: Episode, plan_file: str | None, plan: Any | None) 
              if (ep.run_dir / n).is_file()]
     query = ep.task.get("query") or "episode"
     return render(
-        "episode.html.j2", title=f"{query} · {r.get('outcome', 'running')} · VLN-Pilot", script=EPISODE_JS,
+        "episode.html.j2", title=f"{query} · {ep.shown_outcome} · VLN-Pilot", script=EPISODE_JS,
         summary=s, result=r, task=ep.task, run_name=ep.run_dir.name,
-        outcome=r.get("outcome") or s.get("status") or "running",
+        outcome=ep.shown_outcome,
         spawn=_spawn(ep), goal_room=room_view(ep.scene, ep.task.get("goal_room")), facts=_facts(ep), files=files,
         colors=colors, chips=_chips(ep, colors), total=len(ep.entries) - 1,
         entries=[_entry(ep, e, plan) for e in ep.entries], plan=_plan(ep, plan_file, plan),

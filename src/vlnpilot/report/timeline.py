@@ -88,6 +88,12 @@ class Episode:
     def task(self) -> dict[str, Any]:
         return self.summary.get("task") or {}
 
+    @property
+    def shown_outcome(self) -> str:
+        """What the page's title, its header and the video's last frame call the end: the outcome, else the record's
+        status (running, interrupted, failed), else "unknown" (a summary that says neither)."""
+        return str(self.result.get("outcome") or self.summary.get("status") or "unknown")
+
     def trajectory(self) -> list[dict[str, float]]:
         """Start pose and the pose after every step."""
         pts = [self.summary["start_pose"]] if self.summary.get("start_pose") else []
