@@ -3,7 +3,9 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from test_environment import BlindDrone
@@ -50,3 +52,16 @@ def test_declared_is_a_documented_outcome_with_its_own_label_and_colour() -> Non
     assert OUTCOME_LABELS["declared"] == "declared (not judged)"
     assert OUTCOME_COLORS["declared"] not in {c for k, c in OUTCOME_COLORS.items() if k != "declared"}
     assert exit_code_for(["declared"]) == OK  # an outcome, not a failure of the program (core/exits.py)
+
+
+def test_an_old_record_of_an_unjudged_success_is_shown_as_declared(tmp_path: Path) -> None:
+    """Recorded before `declared` was an outcome: outcome success, judged_by declared; the page never says success."""
+    from report_samples import make_run
+    from vlnpilot.report.html import write_episode_report
+
+    run = make_run(tmp_path / "r", steps=2)
+    summary = json.loads((run / "summary.json").read_text())
+    summary["result"]["judged_by"] = "declared"
+    (run / "summary.json").write_text(json.dumps(summary))
+    page = write_episode_report(run).read_text()
+    assert 'class="outcome declared"' in page and 'class="outcome success"' not in page

@@ -91,8 +91,12 @@ class Episode:
     @property
     def shown_outcome(self) -> str:
         """What the page's title, its header and the video's last frame call the end: the outcome, else the record's
-        status (running, interrupted, failed), else "unknown" (a summary that says neither)."""
-        return str(self.result.get("outcome") or self.summary.get("status") or "unknown")
+        status (running, interrupted, failed), else "unknown" (a summary that says neither). A declaration nobody
+        judged, recorded as a success before `declared` was an outcome of its own, is shown as `declared`."""
+        outcome = self.result.get("outcome")
+        if outcome in ("success", "unreachable") and self.result.get("judged_by") == "declared":
+            return "declared"
+        return str(outcome or self.summary.get("status") or "unknown")
 
     def trajectory(self) -> list[dict[str, float]]:
         """Start pose and the pose after every step."""
