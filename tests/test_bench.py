@@ -191,7 +191,7 @@ def test_resume_with_a_changed_config_is_refused(tiny: Path, tmp_path: Path):
     with pytest.raises(BenchError, match="suite rows"):
         run_bench(inline(changed, out, reps=1, resume=True))
     with pytest.raises(BenchError, match="pilots: recorded"):
-        run_bench(inline(tiny, out, reps=1, pilots=("oracle:other",), resume=True))
+        run_bench(inline(tiny, out, reps=1, pilots=("noisy-oracle",), resume=True))
     assert ((out / "results.jsonl").read_bytes(), (out / MANIFEST).read_bytes()) == before  # untouched
     # Executor and workers are not part of the config: resuming with others is fine.
     assert run_bench(inline(tiny, out, reps=1, workers=3, resume=True)).finished == 2

@@ -343,6 +343,6 @@ def test_episode_config_rejects_bad_values(kwargs: dict[str, Any]) -> None:
 def test_environment_without_ground_truth(geo: Simulator) -> None:
     pilot = ScriptedPilot([answer("C1", "Stay on Room")])
     result = run_episode(BlindEnv(geo), pilot, parse_query("Go to the bathroom", geo.scene), spawn="bedroom")
-    assert result.outcome == "success" and "no ground truth" in result.reason
+    assert result.outcome == "declared" and not result.success and "no ground truth" in result.reason  # unjudged
     with pytest.raises(ConfigError, match="needs ground truth"):
         run_episode(BlindEnv(geo), OraclePilot(), parse_query("Go to the bathroom", geo.scene), spawn="bedroom")

@@ -97,7 +97,7 @@ def scene_render(scene: SceneOpt = "cabin",
     Without --spawn, also SPAWN-front.png and SPAWN-rear.png from every spawn point of the scene."""
     from PIL import Image
 
-    from vlnpilot.core.rundir import check_writable
+    from vlnpilot.core.rundir import check_not_a_bench, check_not_a_run, check_writable
     from vlnpilot.report.floorplan import save_floorplan
     from vlnpilot.sim import SimConfig, Simulator
 
@@ -106,6 +106,8 @@ def scene_render(scene: SceneOpt = "cabin",
         spawn_id = spawn or sim.scene.spawns[0].id
         sim.scene.spawn(spawn_id)  # validate before creating the output directory
         out_dir = check_writable(out or Path("runs") / f"scene-{sim.scene.name}-{spawn_id}")
+        check_not_a_run(out_dir, "a scene's pictures")
+        check_not_a_bench(out_dir, "a scene's pictures")
         obs = sim.reset(spawn_id)
         Image.fromarray(obs.front_rgb).save(out_dir / "front.png")
         Image.fromarray(obs.rear_rgb).save(out_dir / "rear.png")
@@ -169,7 +171,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     from vlnpilot.core.exits import check_base_url, exit_code_for
     from vlnpilot.core.fsm import default_profile
     from vlnpilot.core.ranging import forward_range
-    from vlnpilot.core.rundir import claim_run_dir, default_run_dir
+    from vlnpilot.core.rundir import ROBOT_EVENTS, claim_run_dir, default_run_dir
     from vlnpilot.episode.config import EpisodeConfig
     from vlnpilot.episode.run import run_recorded_episode
     from vlnpilot.pilots.base import make_pilot
@@ -220,7 +222,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
     station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
-    with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
+    with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / ROBOT_EVENTS,
                                         operator=operator, sensors=sensors, camera=camera,
                                         camera_lag_ms=camera_lag_ms, randomize=randomize, detail=detail) as env:
         try:
@@ -230,7 +232,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         except KeyboardInterrupt:
             err_console.print(f"interrupted: every step recorded so far is kept in {escape(str(run_dir))}")
             raise typer.Exit(130) from None
-    colour = "green" if result.success else "red"
+    colour = "green" if result.success else "yellow" if result.outcome == "declared" else "red"
     console.print(f"[bold {colour}]{result.outcome}[/bold {colour}] in {result.steps} steps: {result.reason}; "
                   f"path {result.path_length_m:.2f} m, SPL {result.spl:.2f}, tokens "
                   f"{result.input_tokens}+{result.output_tokens}, cost ${result.cost_usd:.4f}")
@@ -432,7 +434,8 @@ def _write_episode_report(run_dir: Path, *, video: bool = True) -> Path:
 
     if video:  # first, so that the page links the video
         write_episode_video(run_dir)
-    return write_episode_report(run_dir)
+    return write_episode_report(run_dir, warn=lambda line: err_console.print(f"warning: {escape(line)}",
+                                                                             highlight=False))
 
 
 @app.command("report")
@@ -441,15 +444,18 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
            ) -> None:
     """Write report.html (and the episode video) for a recorded run, or the report of a bench directory."""
     from vlnpilot.core.errors import ConfigError
+    from vlnpilot.core.fileio import check_not_directories
 
     if not run_dir.is_dir():
         raise ConfigError(f"{run_dir} is not a directory; give a run directory (with summary.json) or a bench "
                           "directory (with results.jsonl)")
     if (run_dir / "results.jsonl").is_file() and not (run_dir / "summary.json").is_file():
+        check_not_directories(run_dir, ("report.html",))
         path = _write_bench_report(run_dir)
     else:
         if not (run_dir / "summary.json").is_file():
             raise ConfigError(f"{run_dir} is not a run directory: summary.json is missing")
+        check_not_directories(run_dir, ("report.html", "floorplan.png", "episode.mp4", "episode.gif"))
         path = _write_episode_report(run_dir, video=video)
     console.print(f"wrote {escape(str(path))}")
 

@@ -27,12 +27,32 @@ FORMAT = "vln-pilot-bench/1"
 def read_manifest(out: str | Path) -> dict[str, Any] | None:
     """A bench directory's manifest, None if it has none; an unreadable one is refused in one line."""
     path = Path(out) / MANIFEST
+    if path.is_dir():
+        raise BenchError(f"{path} is a directory, not a bench manifest; remove it or choose another --out")
     if not path.is_file():
         return None
     try:
-        return json.loads(path.read_text())
-    except ValueError as exc:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as exc:
         raise BenchError(f"{path} is not valid JSON ({exc}); not a bench directory") from None
+    problem = _shape_problem(manifest)
+    if problem:
+        raise BenchError(f"{path} is not a bench manifest: {problem}; restore it or choose another --out")
+    return manifest
+
+
+def _shape_problem(manifest: Any) -> str | None:
+    """What makes `manifest` unreadable as one `vln-pilot bench` writes (the fields its readers rely on)."""
+    if not isinstance(manifest, dict):
+        return f"it holds a JSON {type(manifest).__name__}, not an object"
+    if not isinstance(manifest.get("suite"), dict):
+        return "its 'suite' is missing or not an object"
+    pilots = manifest.get("pilots")
+    if not isinstance(pilots, list) or not all(isinstance(p, dict) and isinstance(p.get("spec"), str) for p in pilots):
+        return "its 'pilots' is missing or not a list of objects with a 'spec'"
+    if "config" in manifest and not isinstance(manifest["config"], dict):
+        return "its 'config' is not an object"
+    return None
 
 
 @dataclass

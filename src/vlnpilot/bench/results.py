@@ -16,6 +16,7 @@ from dataclasses import dataclass, make_dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from vlnpilot.core.errors import ConfigError
 from vlnpilot.episode import measures as episode_measures
 from vlnpilot.episode.measures import Aggregate, Mean
 
@@ -34,6 +35,15 @@ def record_key(record: dict[str, Any]) -> Key:
     return str(record["pilot"]), str(record["row"]), int(record["rep"])
 
 
+def _check_result(record: dict[str, Any], path: Path, number: int) -> None:
+    """ConfigError naming the line of an episode's record that lacks its result (every table reads it)."""
+    result = record.get("result")
+    if not isinstance(result, dict) or not isinstance(result.get("outcome"), str):
+        raise ConfigError(f"{path} line {number}: the record of {episode_key(*record_key(record))} has no result "
+                          "(an object with an outcome); restore the file, or delete the line and --resume to fly "
+                          "that episode again")
+
+
 class ResultsLog:
     """The append-only results file of a bench directory."""
 
@@ -48,7 +58,7 @@ class ResultsLog:
         out: list[dict[str, Any]] = []
         seen: set[Key] = set()
         with open(self.path, "rb") as fh:
-            for raw in fh:
+            for number, raw in enumerate(fh, 1):
                 if not raw.endswith(b"\n"):  # torn last line: the writer died mid-write
                     break
                 try:
@@ -56,6 +66,7 @@ class ResultsLog:
                     key = record_key(record)
                 except (ValueError, KeyError, TypeError):
                     continue
+                _check_result(record, self.path, number)
                 if key not in seen:
                     seen.add(key)
                     out.append(record)

@@ -29,13 +29,13 @@ from vlnpilot.bench.manifest import FORMAT, MANIFEST, BenchManifest, bench_lock,
 from vlnpilot.bench.rate_column import RateColumn
 from vlnpilot.bench.results import RESULTS, PilotSummary, ResultsLog, episode_key, record_key, summarize
 from vlnpilot.bench.suite import Suite, episode_seed, load_suite, suite_from_dict
-from vlnpilot.bench.tables import render_tables
+from vlnpilot.bench.tables import SUMMARY_CSV, TABLE_CSV, TABLE_MD, TABLE_TEX, render_tables
 from vlnpilot.core.decision import traits_of
 from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.exits import shorten
-from vlnpilot.core.fileio import write_atomic
+from vlnpilot.core.fileio import check_not_directories, write_atomic
 from vlnpilot.core.fsm import PROFILES
-from vlnpilot.core.rundir import check_writable, default_run_dir, git_sha, package_versions
+from vlnpilot.core.rundir import check_not_a_run, check_writable, default_run_dir, git_sha, package_versions
 from vlnpilot.pilots.ratelimit import share_budgets
 
 _FAIL_FAST = 3  # abort when this many episodes failed before any finished: something systemic is wrong
@@ -253,6 +253,8 @@ def _in_key_order(records: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
 # ------------------------------------------------------------------------------------------------- running
 Printer = Callable[[str], None]
 RATE_DIR = "rate"  # the shared rate budgets of the bench's workers (pilots/ratelimit.py)
+# The files a bench writes in its directory (the report's page too: report.html)
+BENCH_OUTPUTS = (MANIFEST, RESULTS, TABLE_MD, TABLE_CSV, TABLE_TEX, SUMMARY_CSV, "report.html")
 
 
 def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
@@ -268,6 +270,8 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     config = config_of(suite, pilots, settings)
     chash = config_hash(config)
     out = _bench_dir(settings, suite)
+    check_not_a_run(out, "a bench")
+    check_not_directories(out, BENCH_OUTPUTS)  # before anything flies: the tables are written after the episodes
     say: Printer = (lambda msg: console.print(msg, highlight=False)) if console is not None else (lambda msg: None)
     started = time.strftime("%Y-%m-%dT%H:%M:%S%z")
     with bench_lock(out):

@@ -1,6 +1,7 @@
 """Exit codes of `vln-pilot` and the checks of command-line values that a framework cannot express.
 
-    0    an episode (or every episode of a bench) was flown to an outcome: success, collision, step limit...
+    0    an episode (or every episode of a bench) was flown to an outcome: success, collision, step limit...;
+         `declared` too (a final state declared without ground truth or a judge: recorded, never a success)
     2    bad input: one line on stderr names the problem and the valid choices
     3    a pilot or provider failure: an episode ended in `pilot_error` (a rejected key, an unknown model...)
     4    a robot's link failed: no reply at start-up (vlnpilot.core.errors.LinkFault), or an episode ended in

@@ -14,6 +14,7 @@ decisions, poses and images are written.
 from __future__ import annotations
 
 import functools
+import io
 import json
 import platform
 import shutil
@@ -29,13 +30,23 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from vlnpilot.core.dirlock import holds_lock, lock_directory, release_directory
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.exits import shorten, undecodable
 from vlnpilot.core.fileio import write_atomic
+from vlnpilot.core.steplog import OnDamage, read_steps
 
 SUMMARY, EPISODE, FRAMES = "summary.json", "episode.jsonl", "frames"
-# Everything a run and its report write: what `overwrite` removes, and what marks a directory as holding a run.
-RUN_FILES = (SUMMARY, EPISODE, FRAMES, "report.html", "episode.mp4", "episode.gif")
+ROBOT_EVENTS = "robot_events.jsonl"  # a real robot's link events, appended by its backend
+TRIAL = "trial.json"  # beside a trial's summary.json: who flew it, when, how (see trials/README.md)
+# Everything a run, its robot and its report write (and a trial's metadata): what `overwrite` removes, and what
+# marks a directory as holding a run.
+RUN_FILES = (SUMMARY, EPISODE, FRAMES, ROBOT_EVENTS, TRIAL, "report.html", "floorplan.png", "episode.mp4",
+             "episode.gif")
+# What only a run writes (a bench writes a report.html and a floorplan.png of its own): what marks a run directory.
+RUN_MARKS = (SUMMARY, EPISODE, FRAMES, ROBOT_EVENTS, TRIAL, "episode.mp4", "episode.gif")
+# What marks a bench directory (vlnpilot.bench.manifest, vlnpilot.bench.results): never a run's to write or clear.
+BENCH_FILES = ("bench.json", "results.jsonl", ".bench.lock")
 MAX_RECORDED_TEXT = 4_000  # characters of one model reply kept in a record (a decision is ~300)
 
 
@@ -47,8 +58,13 @@ def cap_text(text: str | None, limit: int = MAX_RECORDED_TEXT) -> str | None:
 
 
 def claim_run_dir(out: str | Path, *, overwrite: bool = False) -> Path:
-    """A writable run directory that holds no other run: refused if it does, or cleared when `overwrite`."""
+    """A writable run directory that holds no other run: refused if it does, or cleared when `overwrite`.
+
+    The directory's run lock is taken first and held by this process (see vlnpilot.core.dirlock), so two runs
+    given one --out never both write it: the second is refused."""
     path = check_writable(out)
+    lock_directory(path)
+    check_not_a_bench(path, "a run (even with --overwrite)")
     found = [name for name in RUN_FILES if (path / name).exists()]
     if found and not overwrite:
         raise ConfigError(f"--out {path} already holds a run ({', '.join(found)}); choose a new directory "
@@ -56,7 +72,25 @@ def claim_run_dir(out: str | Path, *, overwrite: bool = False) -> Path:
     for name in found:
         target = path / name
         shutil.rmtree(target) if target.is_dir() else target.unlink()
+    for stale in path.glob(".*.tmp"):  # a temporary file of an atomic write the old run was killed in
+        stale.unlink()
     return path
+
+
+def check_not_a_bench(path: Path, what: str) -> None:
+    """ConfigError if `path` holds a bench: `what` (e.g. "a run") is never written into one."""
+    found = [name for name in BENCH_FILES if (path / name).exists()]
+    if found:
+        raise ConfigError(f"--out {path} holds a bench ({', '.join(found)}); {what} is never written into a bench "
+                          "directory: choose another --out")
+
+
+def check_not_a_run(path: Path, what: str) -> None:
+    """ConfigError if `path` holds a run: `what` (e.g. "a bench") is never written into one."""
+    found = [name for name in RUN_MARKS if (path / name).exists()]
+    if found:
+        raise ConfigError(f"--out {path} holds a run ({', '.join(found)}); {what} is never written into a run "
+                          "directory: choose another --out")
 
 
 def check_writable(out: str | Path) -> Path:
@@ -153,6 +187,7 @@ class Recorder:
 
     def __init__(self, run_dir: str | Path, *, jpeg_quality: int = 85, save_frames: bool = True,
                  overwrite: bool = False):
+        self._owns_lock = not holds_lock(Path(run_dir))  # a caller that claimed the directory holds it on
         self.run_dir = claim_run_dir(run_dir, overwrite=overwrite)
         self._summary: dict[str, Any] = {"status": "running"}
         write_json_atomic(self.run_dir / SUMMARY, self._summary)  # first: never frames without a summary
@@ -175,7 +210,9 @@ class Recorder:
         for key, img in (("front", front), ("rear", rear)):
             if img.size > 3:  # observations of a render-less simulator carry 1x1 placeholders
                 path = self.frame_paths(step)[key]
-                Image.fromarray(img).save(self.run_dir / path, quality=self.jpeg_quality)
+                jpeg = io.BytesIO()
+                Image.fromarray(img).save(jpeg, format="JPEG", quality=self.jpeg_quality)
+                write_atomic(self.run_dir / path, jpeg.getvalue())  # a kill mid-write never leaves a torn frame
                 written[key] = path
         return written
 
@@ -204,6 +241,8 @@ class Recorder:
             write_json_atomic(self.run_dir / SUMMARY, self._summary)
         if not self._episode.closed:
             self._episode.close()
+        if self._owns_lock:
+            release_directory(self.run_dir)
         _OPEN.discard(self)
 
 
@@ -219,21 +258,15 @@ def close_open_records(status: str = "interrupted") -> int:
     return len(records)
 
 
-def load_run(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """Read a run directory back: (summary, steps). A truncated last line (killed mid-write) is skipped."""
+def load_run(run_dir: str | Path, on_damage: OnDamage | None = None) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """Read a run directory back: (summary, steps). A truncated last line (killed mid-write) is skipped; another
+    damaged line is a ConfigError naming it, or skipped and told to `on_damage` (see core/steplog.py)."""
     run_dir = Path(run_dir)
     summary = load_summary(run_dir)
-    steps = []
-    if (run_dir / EPISODE).is_file():
-        for line in (run_dir / EPISODE).read_text().splitlines():
-            try:
-                steps.append(json.loads(line))
-            except json.JSONDecodeError:
-                break
-    return summary, steps
-
-
-TRIAL = "trial.json"  # beside a trial's summary.json: who flew it, when, how (see trials/README.md)
+    path = run_dir / EPISODE
+    if path.is_dir():
+        raise ConfigError(f"{path} is a directory, not a run's steps; restore the file or fly the run again")
+    return summary, read_steps(path, on_damage) if path.is_file() else []
 
 
 def load_summary(run_dir: str | Path) -> dict[str, Any]:
@@ -253,4 +286,14 @@ def load_summary(run_dir: str | Path) -> dict[str, Any]:
 def load_trial(run_dir: str | Path) -> dict[str, Any]:
     """A trial's metadata (trial.json), or {} for a plain run."""
     path = Path(run_dir) / TRIAL
-    return json.loads(path.read_text()) if path.is_file() else {}
+    if path.is_dir():
+        raise ConfigError(f"{path} is a directory, not a trial's metadata; remove it or restore the file")
+    if not path.is_file():
+        return {}
+    try:
+        trial = json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path} is not valid JSON ({exc}); restore it (trials/README.md)") from None
+    if not isinstance(trial, dict):
+        raise ConfigError(f"{path} holds a {type(trial).__name__}, not a trial's metadata (a JSON object)")
+    return trial

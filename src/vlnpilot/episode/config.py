@@ -24,8 +24,10 @@ __all__ = ["OUTCOMES", "EpisodeConfig", "Gate", "JudgeOutcome", "LoopControl"]
 # link_lost: a real robot's link died in flight (its watchdog sent `land`; nothing after it counts as executed)
 # unreachable (issue 24): the pilot reported Goal Unreachable and the goal is truly unreachable by the true map at
 # that moment, a success of its own kind (a report for a reachable goal is a false_success)
+# declared: without ground truth and without a judge (--judge none) the pilot declared a final state that nobody
+# judged: never a success (the standard: nothing is reported a success that was not judged one)
 OUTCOMES = ("success", "false_success", "collision", "max_steps", "pilot_error", "halted", "link_lost", "aborted",
-            "unreachable")
+            "unreachable", "declared")
 JudgeOutcome = Callable[[Task, State], tuple[bool, str]]  # the operator's word on a declared final state
 
 

@@ -95,9 +95,10 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
                 on_step: StepCallback | None = None, pilot_spec: str | None = None,
                 judge_outcome: JudgeOutcome | None = None, control: LoopControl | None = None) -> EpisodeResult:
     """Fly one episode of `task` (a Task, or a Mission of stages) from `spawn` with `pilot`; record it if a
-    recorder is given. Without ground truth (a real robot) a final state is a success as declared, unless
-    `judge_outcome` (the operator) rules. A stage judged a success hands over to the next one from Recognize
-    Room; a stage judged a failure ends the mission. The budget is `config.max_steps` per stage, shared."""
+    recorder is given. Without ground truth (a real robot) `judge_outcome` (the operator) judges a final state;
+    without it too the episode ends `declared` (never a success: nobody judged it). A stage judged a success (or
+    declared) hands over to the next one from Recognize Room; a stage judged a failure ends the mission.
+    The budget is `config.max_steps` per stage, shared."""
     config, t_start, control = config or EpisodeConfig(), time.perf_counter(), control or _NoControl()
     config = _as_recorded(pilot, config)  # before the adapter: a wrapper (the bench's timer) delegates to the replay
     pilot = as_base_pilot(pilot)  # its traits and hooks, declared (a bare-protocol pilot is adapted once, here)
@@ -135,7 +136,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
         if end is None and flown is not None:  # the FSM moves on; a final state ends the stage, judged
             state = verdict.next_state
             end = _judged(progress, state, gt, config, judge_outcome) if state in FINAL_STATES else None
-            if end is not None and end.outcome == "success" and not progress.last:  # on to the next stage
+            if end is not None and end.outcome in ("success", "declared") and not progress.last:  # next stage
                 progress.advance(step)
                 asker.stage, state, end = progress.stage, State.RECOGNIZE_ROOM, None
         if end is not None:
@@ -264,9 +265,9 @@ def _judged(progress: MissionProgress, state: State, gt: GroundTruth | None, con
     if gt is None and judge_outcome is not None:
         ok, reason = judge_outcome(progress.task, state)
         return _End(right if ok else "false_success", progress.prefix(ok, reason), judged_by="operator")
-    if gt is None:
-        return _End(right, progress.prefix(True, "final state declared (no ground truth to judge it)"),
-                    judged_by="declared")
+    if gt is None:  # nobody can judge it: recorded as declared, never as a success
+        return _End("declared", progress.prefix(True, "final state declared; not judged (no ground truth, "
+                                                      "no operator: --judge none)"), judged_by="declared")
     ok, why = progress.judge(state, gt, config.success)
     return _End(right if ok else "false_success", progress.prefix(ok, why))
 

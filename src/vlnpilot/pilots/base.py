@@ -9,6 +9,7 @@ from typing import Any, Protocol, runtime_checkable
 from vlnpilot.core.decision import NO_TRAITS, Decision, PilotInput, PilotTraits, traits_of
 from vlnpilot.core.environment import GroundTruth
 from vlnpilot.core.errors import ConfigError, VLNPilotError
+from vlnpilot.core.exits import shorten
 from vlnpilot.core.extras import require
 from vlnpilot.core.registry import Registry
 from vlnpilot.pilots.options import OpenPilotOptions, PilotOptions
@@ -188,8 +189,25 @@ def make_pilot(spec: str, **options: Any) -> Pilot:
     name, model = parse_spec(spec)
     entry = registration(name)
     if model is not None:
+        _check_takes_model(name, model, entry.options)
         options["model"] = model
     return entry.factory(**entry.options.build(name, **options).given())
+
+
+def _check_takes_model(name: str, model: str, options: type[PilotOptions]) -> None:
+    """ConfigError for `name:model` when the pilot has no model to choose (its results would carry a wrong one)."""
+    if options.takes_model:
+        return
+    takers = [n for n in known_pilots() if _takes_model(n)]
+    raise ConfigError(f"the {name} pilot takes no model (got {name}:{shorten(model, 40)}); write {name}. "
+                      f"Pilots that take a model or a path after ':': {', '.join(takers)}")
+
+
+def _takes_model(name: str) -> bool:
+    try:
+        return pilot_options_class(name).takes_model
+    except VLNPilotError:  # a pilot whose extra is missing still takes its model
+        return True
 
 
 def close_pilot(pilot: Pilot) -> None:

@@ -27,6 +27,9 @@ class PilotOptions(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, arbitrary_types_allowed=True, populate_by_name=True)
     programmatic: ClassVar[frozenset[str]] = frozenset()
+    # Whether a SPEC may name a model (name:MODEL); a pilot that has none (the oracle) is refused one, so that
+    # no result is ever labelled with a model that did not fly it.
+    takes_model: ClassVar[bool] = True
 
     model: str | None = None
 

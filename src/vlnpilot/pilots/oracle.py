@@ -66,6 +66,7 @@ class OracleOptions(PilotOptions):
     """The oracle's distances (metres). `success` is programmatic: the thresholds its episodes are judged by."""
 
     programmatic: ClassVar[frozenset[str]] = frozenset({"success"})
+    takes_model: ClassVar[bool] = False  # it flies on ground truth, whatever a SPEC says
 
     model: str = "ground-truth"
     approach_m: float = 0.45  # the approach point's distance before a doorway

@@ -57,7 +57,8 @@ class ReplayPilot(BasePilot):
         steps: list[dict[str, Any]] = []
         self.summary: dict[str, Any] = {}
         self.trial: dict[str, Any] = {}
-        if self.run_dir is None:  # a set of trials without a row: the bench checks the spec once this way
+        self.is_trial_set = self.run_dir is None  # a set of trials without a row: the bench checks the spec this way
+        if self.run_dir is None:
             self.run_dir = Path(source)
         else:
             self.summary, steps = load_run(self.run_dir)
@@ -69,17 +70,16 @@ class ReplayPilot(BasePilot):
 
     def episode_started(self, scene: Any, config: Any) -> None:
         """Refuse to replay on another scene or with other settings: the outcome could not be reproduced."""
-        if not self.summary:
+        if self.is_trial_set:
             raise ConfigError(f"{self.run_dir} is a set of trials: replay it with its suite, e.g. vln-pilot bench "
                               f"--suite {self.run_dir}/suite.yaml --pilots replay:{self.run_dir}, or give one trial: "
                               f"replay:{self.run_dir}/ROW")
         flown = self.trial.get("scene") or self.summary.get("scene")
-        mark = self.trial.get("scene_fingerprint") or self.summary.get("provenance", {}).get("scene_fingerprint")
-        if flown != scene.name or (mark is not None and mark != scene.fingerprint()):
-            events = (self.summary.get("scenario") or {}).get("name")
-            hint = f" --events {events} (its recorded scenario)" if events else ""
-            raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
-                              f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}{hint}")
+        if not isinstance(flown, str) or not flown:
+            status = self.summary.get("status") or "no status"
+            raise ConfigError(f"{self.run_dir} holds no episode to replay: its summary.json names no scene ({status}); "
+                              "give a run directory that was flown")
+        self._check_same_scene(flown, scene)
         # What decides the outcome of the same answers (a longer step limit only runs the recording out).
         now = {"profile": config.profile, "shield": config.shield, "context": context_name(config.context)}
         then = _flown_with(self.summary.get("config", {}))
@@ -87,6 +87,20 @@ class ReplayPilot(BasePilot):
                   if then[key] is not None and str(then[key]) != str(now[key])]
         if differ:
             raise ConfigError(f"{self.run_dir} was flown with other settings; replay it with {' '.join(differ)}")
+
+    def _check_same_scene(self, flown: str, scene: Any) -> None:
+        """Refuse another scene (say which to pass), or the same scene changed since (nothing to pass)."""
+        mark = self.trial.get("scene_fingerprint") or (self.summary.get("provenance") or {}).get("scene_fingerprint")
+        events = (self.summary.get("scenario") or {}).get("name")
+        hint = f" --events {events} (its recorded scenario)" if events else ""
+        if flown != scene.name:
+            raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} ({mark or 'no fingerprint'}); this episode "
+                              f"flies {scene.name!r} ({scene.fingerprint()}): replay it with --scene {flown}{hint}")
+        if mark is not None and mark != scene.fingerprint():
+            fix = (f"replay it with{hint}" if events else
+                   "the scene changed since (or the record was edited): it cannot be replayed, fly it again")
+            raise ConfigError(f"{self.run_dir} was flown in scene {flown!r} with fingerprint {mark}; today's "
+                              f"{scene.name!r} has fingerprint {scene.fingerprint()}: {fix}")
 
     @property
     def recorded_mover_clearance(self) -> str | None:

@@ -35,6 +35,7 @@ class StdinOptions(PilotOptions):
     """The options of the stdin pilot. `input` and `output` (text streams) are programmatic."""
 
     programmatic: ClassVar[frozenset[str]] = frozenset({"input", "output"})
+    takes_model: ClassVar[bool] = False  # a person answers: no model to name
 
     model: str = "stdin"
     image_dir: Path | None = None  # where front images go; None: a fresh temporary directory

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -228,21 +228,23 @@ def render_episode_report(ep: Episode, plan_file: str | None, plan: Any | None) 
              if (ep.run_dir / n).is_file()]
     query = ep.task.get("query") or "episode"
     return render(
-        "episode.html.j2", title=f"{query} · {r.get('outcome', 'running')} · VLN-Pilot", script=EPISODE_JS,
+        "episode.html.j2", title=f"{query} · {ep.shown_outcome} · VLN-Pilot", script=EPISODE_JS,
         summary=s, result=r, task=ep.task, run_name=ep.run_dir.name,
-        outcome=r.get("outcome") or s.get("status") or "running",
+        outcome=ep.shown_outcome,
         spawn=_spawn(ep), goal_room=room_view(ep.scene, ep.task.get("goal_room")), facts=_facts(ep), files=files,
         colors=colors, chips=_chips(ep, colors), total=len(ep.entries) - 1,
         entries=[_entry(ep, e, plan) for e in ep.entries], plan=_plan(ep, plan_file, plan),
         prov=prov, cfg=s.get("config") or {}, versions=", ".join(f"{k} {v}" for k, v in
                                                                 (prov.get("versions") or {}).items()),
-        written=time.strftime("%Y-%m-%d %H:%M:%S"))
+        warnings=ep.warnings, written=time.strftime("%Y-%m-%d %H:%M:%S"))
 
 
-def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) -> Path:
+def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None,
+                         warn: Callable[[str], None] | None = None) -> Path:
     """Write `report.html` (and `floorplan.png`) into a run directory; returns the page's path.
 
-    Works on a finished run and on one still running or interrupted (the page shows the steps so far).
+    Works on a finished run and on one still running or interrupted (the page shows the steps so far). What of
+    the recording could not be read is shown on the page and told to `warn` (the command line prints it).
     """
     from vlnpilot.report.plots import episode_plan
 
@@ -255,7 +257,11 @@ def write_episode_report(run_dir: str | Path, *, out: str | Path | None = None) 
         (run_dir / FLOORPLAN).write_bytes(plan.png())
     page = render_episode_report(ep, plan_file, plan)
     path = Path(out) if out is not None else run_dir / REPORT
-    return write_atomic(path, page)
+    written = write_atomic(path, page)
+    if warn is not None:
+        for line in ep.warnings:
+            warn(line)
+    return written
 
 
 def _stage_start(ep: Episode, entry: Entry) -> dict[str, Any] | None:

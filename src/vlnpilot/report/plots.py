@@ -28,11 +28,12 @@ from vlnpilot.episode.config import OUTCOMES  # noqa: E402
 OUTCOME_ORDER = OUTCOMES
 OUTCOME_COLORS = {"success": "#2f9e63", "false_success": "#e5a50a", "collision": "#d1495b",
                   "max_steps": "#5b7fbf", "pilot_error": "#8e6bbf", "halted": "#b5651d",
-                  "link_lost": "#7a2e2e", "aborted": "#555555", "unreachable": "#3a9fb5"}
+                  "link_lost": "#7a2e2e", "aborted": "#555555", "unreachable": "#3a9fb5",
+                  "declared": "#9a8c3c"}
 OUTCOME_LABELS = {"success": "success", "false_success": "false success", "collision": "collision",
                   "max_steps": "steps exceeded", "pilot_error": "pilot error", "halted": "halted (robot safety)",
                   "link_lost": "link lost (landed)", "aborted": "aborted (e-stop)",
-                  "unreachable": "unreachable (reported)"}
+                  "unreachable": "unreachable (reported)", "declared": "declared (not judged)"}
 HALF = (6.4, 4.0)  # figures shown side by side; FULL_W: figures shown across the page
 FULL_W = 12.8
 PILOT_COLORS = ("#3b6fb6", "#e07b39", "#4a9d5b", "#c2464f", "#7d5fb2", "#8c6d46", "#d36fb0", "#6f7780")

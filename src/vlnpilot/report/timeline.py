@@ -78,6 +78,7 @@ class Episode:
     steps: list[dict[str, Any]]
     entries: list[Entry]
     scene: Any | None  # vlnpilot.scene.Scene when the scene could be loaded
+    warnings: list[str] = field(default_factory=list)  # what of the recording could not be read (shown on the page)
 
     @property
     def result(self) -> dict[str, Any]:
@@ -86,6 +87,16 @@ class Episode:
     @property
     def task(self) -> dict[str, Any]:
         return self.summary.get("task") or {}
+
+    @property
+    def shown_outcome(self) -> str:
+        """What the page's title, its header and the video's last frame call the end: the outcome, else the record's
+        status (running, interrupted, failed), else "unknown" (a summary that says neither). A declaration nobody
+        judged, recorded as a success before `declared` was an outcome of its own, is shown as `declared`."""
+        outcome = self.result.get("outcome")
+        if outcome in ("success", "unreachable") and self.result.get("judged_by") == "declared":
+            return "declared"
+        return str(outcome or self.summary.get("status") or "unknown")
 
     def trajectory(self) -> list[dict[str, float]]:
         """Start pose and the pose after every step."""
@@ -161,12 +172,34 @@ def event_point(scene: Any, event: dict[str, Any], tracks: dict[str, dict[str, A
     return None
 
 
-def _existing(run_dir: Path, frames: dict[str, str] | None) -> dict[str, str]:
-    out = {}
-    for view, rel in (frames or {}).items():
-        if isinstance(rel, str) and (run_dir / rel).is_file():
-            out[view] = rel
-    return out
+class _FrameCheck:
+    """Which recorded frames can be drawn: a frame that is missing, or damaged (torn, empty, not an image), is left
+    out (the page and the video draw a placeholder), and a damaged one is said once in `warnings`."""
+
+    def __init__(self, run_dir: Path, warnings: list[str]):
+        self.run_dir, self.warnings = run_dir, warnings
+        self._readable: dict[str, bool] = {}
+
+    def existing(self, frames: dict[str, str] | None) -> dict[str, str]:
+        return {view: rel for view, rel in (frames or {}).items() if isinstance(rel, str) and self._ok(rel)}
+
+    def _ok(self, rel: str) -> bool:
+        if rel not in self._readable:
+            self._readable[rel] = self._decodes(self.run_dir / rel)
+        return self._readable[rel]
+
+    def _decodes(self, path: Path) -> bool:
+        if not path.is_file():
+            return False
+        from PIL import Image
+
+        try:
+            with Image.open(path) as im:
+                im.load()
+        except (OSError, SyntaxError, ValueError) as exc:  # PIL's errors for a torn, empty or foreign file
+            self.warnings.append(f"{path} is damaged ({exc}); drawn as a placeholder")
+            return False
+        return True
 
 
 def _interventions(record: dict[str, Any]) -> list[Any]:
@@ -208,7 +241,9 @@ def load_scene_or_none(name: str | None) -> Any | None:
 def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
     """Read a run directory into an `Episode` with its timeline (scene loaded by name unless given)."""
     run_dir = Path(run_dir)
-    summary, steps = load_run(run_dir)
+    warnings: list[str] = []
+    summary, steps = load_run(run_dir, on_damage=warnings.append)  # a damaged line is skipped, and said
+    frames_ok = _FrameCheck(run_dir, warnings)
     if scene is None:
         scene = load_scene_or_none(summary.get("scene"))
     prev_frames = summary.get("start_frames") or {"front": "frames/front_000.jpg", "rear": "frames/rear_000.jpg"}
@@ -226,7 +261,7 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
             raw_text=rec.get("raw_text"), pose=pose, pose_after=rec.get("pose_after"),
             collided=bool(rec.get("collided")), contact=rec.get("contact"), room_true=room,
             oscillation=bool(rec.get("oscillation")), interventions=_interventions(rec),
-            frames=_existing(run_dir, prev_frames),
+            frames=frames_ok.existing(prev_frames),
             oscillation_event=rec.get("oscillation_event") or None,
             feedback=[str(f) for f in rec.get("safety_feedback") or []],
             extra={k: v for k, v in rec.items() if k not in known and v is not None},  # `override: null` says nothing
@@ -244,9 +279,9 @@ def load_episode(run_dir: str | Path, scene: Any | None = None) -> Episode:
         executed=None, failures=[], usage={}, raw_text=None, pose=end_pose, pose_after=None,
         collided=bool(last.get("collided")), contact=last.get("contact"),
         room_true=_room_at(scene, end_pose) or result.get("final_room") or last.get("room_true"),
-        oscillation=False, interventions=[], frames=_existing(run_dir, prev_frames), movers=prev_movers,
+        oscillation=False, interventions=[], frames=frames_ok.existing(prev_frames), movers=prev_movers,
     ))
-    return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene)
+    return Episode(run_dir=run_dir, summary=summary, steps=steps, entries=entries, scene=scene, warnings=warnings)
 
 
 def finite(value: Any) -> bool:

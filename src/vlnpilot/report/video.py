@@ -118,7 +118,7 @@ class _Composer:
             draw.text((x + 10, y), move, fill=INK, font=self.font, anchor="lm")
         else:
             r = self.ep.result
-            outcome = str(r.get("outcome") or "running")
+            outcome = self.ep.shown_outcome
             x = self._tag(draw, (x + 4, y - 11), outcome.replace("_", " "),
                           _rgb(OUTCOME_COLORS.get(outcome, "#5f6b7a"))) + 10
             draw.text((x, y), str(r.get("reason") or "")[:110], fill=MUTED, font=self.font, anchor="lm")
