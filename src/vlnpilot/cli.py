@@ -124,7 +124,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
         pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC: name or name:model.")] = None,
         max_steps: Annotated[int, typer.Option("--max-steps", min=1, max=MAX_STEPS, help="Step limit.")] = 50,
-        seed: Annotated[int | None, typer.Option("--seed")] = None,
+        seed: Annotated[int | None, typer.Option("--seed", min=0, help="Seed of the episode (0 or more).")] = None,
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
         pilot_option: PilotOptionOpt = None,
@@ -465,7 +465,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           ray_address: Annotated[str | None, typer.Option("--ray-address")] = None,
           out: OutOpt = None,
           resume: Annotated[bool, typer.Option("--resume", help="Run only the episodes missing in --out.")] = False,
-          seed: Annotated[int | None, typer.Option("--seed", help="Base seed of the repetitions.")] = None,
+          seed: Annotated[int | None, typer.Option("--seed", min=0, help="Base seed of the repetitions "
+                                                                    "(0 or more).")] = None,
           profile: Annotated[str | None, typer.Option("--profile", help=PROFILE_HELP)] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           pilot_option: PilotOptionOpt = None,

@@ -163,7 +163,7 @@ class Scenario(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     name: str = "scenario"
     scene: str = "cabin"
-    seed: int = 0
+    seed: int = Field(default=0, ge=0)  # numpy's generators take no negative seed
     description: str = ""
     events: tuple[EventSpec, ...] = Field(default=(), max_length=16)
 
