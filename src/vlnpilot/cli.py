@@ -613,6 +613,14 @@ def main() -> None:
             raise
         _one_line_error(message)
         sys.exit(2)
+    except OSError as exc:  # a path argument too long for the file system: one line; any other is a fault
+        from vlnpilot.core.exits import path_error_message
+
+        message = path_error_message(exc)
+        if message is None:
+            raise
+        _one_line_error(message)
+        sys.exit(2)
     except NoArgsIsHelpError as exc:  # a bare `vln-pilot`: the help, as before
         exc.show()
         sys.exit(exc.exit_code)

@@ -3,8 +3,6 @@ written (exit code 2, no traceback)."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from cli_support import run_main
@@ -42,3 +40,26 @@ def test_a_scenario_with_a_negative_seed_is_refused_before_a_directory_is_made(m
     out = tmp_path / "seedneg"
     err = refused(monkeypatch, capsys, "run", Q, *FLY, "--events", str(events), "--out", str(out))
     assert "seed" in err and not out.exists()
+
+
+# -- files that cannot be read, names that cannot be made ---------------------------------------------------------
+def test_an_events_file_that_is_not_utf8_is_one_line(monkeypatch, capsys, tmp_path) -> None:
+    events = tmp_path / "ev_bin.yaml"
+    events.write_bytes(b"\xff\xfe")
+    err = refused(monkeypatch, capsys, "run", Q, *FLY, "--events", str(events), "--out", str(tmp_path / "r"))
+    assert "ev_bin.yaml" in err and "UTF-8" in err
+
+
+LONG = "x" * 300  # longer than a file name may be (255 bytes)
+
+
+@pytest.mark.parametrize("command", [
+    ["run", Q, *FLY, "--out", LONG], ["bench", "--reps", "1", "--out", LONG], ["scene", "render", "--out", LONG],
+    ["report", LONG], ["watch", LONG], ["bench", "--suite", f"{LONG}.yaml"],
+    ["run", Q, *FLY, "--events", f"{LONG}.yaml"],
+    ["run", Q, *FLY, "--pilot", f"replay:{LONG}"], ["bench", "--pilots", f"replay:{LONG}"],
+])
+def test_a_path_too_long_is_one_line(monkeypatch, capsys, tmp_path, command) -> None:
+    monkeypatch.chdir(tmp_path)
+    err = refused(monkeypatch, capsys, *command)
+    assert "too long" in err and LONG not in err  # named, shortened

@@ -212,6 +212,17 @@ def scenario_from_dict(data: Any, source: str = "<dict>") -> Scenario:
         raise _one_line(exc, source) from None
 
 
+def _read_text(path: Path) -> str:
+    """A scenario file's text, or one ConfigError line: not UTF-8 text, or unreadable."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"--events {path.name}: not UTF-8 text (byte {exc.object[exc.start:exc.start + 1].hex()} "
+                          f"at offset {exc.start}); a scenario is a YAML file") from None
+    except OSError as exc:
+        raise ConfigError(f"--events {path.name}: cannot read it: {exc.strerror or exc}") from None
+
+
 def builtin_scenarios() -> list[str]:
     root = resources.files("vlnpilot.scene") / BUILTIN_DIR
     return sorted(p.name.removesuffix(".yaml") for p in root.iterdir() if p.name.endswith(".yaml"))
@@ -225,7 +236,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         if not path.is_file():
             raise ConfigError(f"--events {text_name}: no such file; built-in scenarios: "
                               f"{', '.join(builtin_scenarios())}")
-        text, source = path.read_text(encoding="utf-8"), path.name
+        text, source = _read_text(path), path.name
     elif text_name in builtin_scenarios():
         text = (resources.files("vlnpilot.scene") / BUILTIN_DIR / f"{text_name}.yaml").read_text(encoding="utf-8")
         source = text_name
