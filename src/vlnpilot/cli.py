@@ -321,20 +321,14 @@ def plan(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to
          planner: PlannerOpt = "pilot",
          as_json: Annotated[bool, typer.Option("--json", help="Print the mission as JSON.")] = False) -> None:
     """Print the plan of an instruction against a scene's map, and fly nothing. Exit code 2 if it is refused."""
-    from vlnpilot.core.exits import check_base_url
-    from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.pilots.planning import can_plan, plan_instruction
+    from vlnpilot.pilots.planning import can_plan, check_planner, plan_instruction
     from vlnpilot.scene import load_scene
 
+    check_planner(planner)  # checked even when the parser plans, as `run` checks it
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
-    pilot_obj = None
-    if pilot is not None:
-        options = _pilot_options(pilot, pilot_option)
-        if base_url:
-            options["base_url"] = check_base_url(base_url)
-        pilot_obj = make_pilot(pilot, **options)
+    pilot_obj = _planning_pilot(pilot, base_url, pilot_option)
     mission, _ = plan_instruction(query, sc, sc.spawn(spawn_id).room, pilot_obj,
                                   planner=planner if can_plan(pilot_obj) else "parser",
                                   say=lambda line: err_console.print(escape(line)))
@@ -344,6 +338,25 @@ def plan(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to
     console.print(f"plan of {escape(repr(query))} in {escape(sc.name)} from {escape(spawn_id)} "
                   f"(by {escape(mission.source)}):")
     console.print(escape(mission.describe()))
+
+
+def _planning_pilot(spec: str | None, base_url: str | None, pairs: list[str] | None) -> Pilot | None:
+    """`plan`'s pilot from its options; without --pilot the parser plans, and an option for a pilot is refused
+    (it would configure nothing)."""
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.core.exits import check_base_url
+    from vlnpilot.pilots.base import make_pilot
+
+    if spec is None:
+        given = [name for name, value in (("--base-url", base_url), ("--pilot-option", pairs)) if value]
+        if given:
+            raise ConfigError(f"{' and '.join(given)} given without --pilot: give the pilot that plans too, e.g. "
+                              "--pilot openai:gpt-4.1 (without one the parser plans, and it takes no options)")
+        return None
+    options = _pilot_options(spec, pairs)
+    if base_url:
+        options["base_url"] = check_base_url(base_url)
+    return make_pilot(spec, **options)
 
 
 def _pilot_options(spec: str, pairs: list[str] | None) -> dict:

@@ -63,3 +63,14 @@ def test_a_path_too_long_is_one_line(monkeypatch, capsys, tmp_path, command) -> 
     monkeypatch.chdir(tmp_path)
     err = refused(monkeypatch, capsys, *command)
     assert "too long" in err and LONG not in err  # named, shortened
+
+
+# -- plan checks what run checks ------------------------------------------------------------------------------------
+@pytest.mark.parametrize(("options", "named"), [
+    (["--planner", "nope"], "valid planners: auto, pilot, parser"),
+    (["--pilot-option", "x"], "--pilot-option"),
+    (["--base-url", "ftp://x"], "--base-url"),
+    (["--pilot-option", "detail=high"], "without --pilot"),
+])
+def test_plan_checks_its_options_without_a_planning_pilot(monkeypatch, capsys, options, named) -> None:
+    assert named in refused(monkeypatch, capsys, "plan", "Go to the bedroom", *options)
