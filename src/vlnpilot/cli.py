@@ -525,9 +525,14 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     options["context"] = context or pins.context or DEFAULT_CONTEXT
     if detail is not None and _checked_detail(detail, "sim") != "plain":  # plain: benches before it hash alike
         options["detail"] = detail
-    if estimate:
+    if estimate:  # checked as a bench that flies checks them, but for its pilots' keys (it counts offline)
+        from vlnpilot.bench.command import check_bench_options
         from vlnpilot.bench.estimate import estimate_command
 
+        check_base_url(base_url)
+        parse_option_pairs(pilot_option or ())
+        check_bench_options(suite, executor=executor, shield=shield, sensors=sensors, episode_options=options,
+                            rate_limit=rate_limit, camera=camera)
         estimate_command(suite, pilots, reps=reps, max_steps=max_steps, profile=profile, context=options["context"],
                          console=console)
         raise typer.Exit(0)

@@ -74,3 +74,17 @@ def test_a_path_too_long_is_one_line(monkeypatch, capsys, tmp_path, command) -> 
 ])
 def test_plan_checks_its_options_without_a_planning_pilot(monkeypatch, capsys, options, named) -> None:
     assert named in refused(monkeypatch, capsys, "plan", "Go to the bedroom", *options)
+
+
+# -- bench --estimate checks what a bench that flies checks -------------------------------------------------------
+@pytest.mark.parametrize(("option", "value"), [
+    ("--shield", "nope"), ("--sensors", "nope"), ("--executor", "nope"), ("--rate-limit", "abc"), ("--camera", "nope"),
+    ("--base-url", "ftp://x"), ("--pilot-option", "x"),
+])
+def test_an_estimate_refuses_what_a_bench_refuses(monkeypatch, capsys, option, value) -> None:
+    assert option.lstrip("-") in refused(monkeypatch, capsys, "bench", "--estimate", "--reps", "1", option, value)
+
+
+def test_an_estimate_of_a_model_pilot_still_needs_no_key(monkeypatch, capsys) -> None:
+    code, out, err = run_main(monkeypatch, capsys, "bench", "--estimate", "--reps", "1", "--pilots", "openai:gpt-4.1")
+    assert code == 0 and "gpt-4.1" in out, err

@@ -93,6 +93,25 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     return report.out
 
 
+def check_bench_options(suite: str | Path = "paper", *, executor: str = "local", shield: str | None = None,
+                        sensors: str = "none", episode_options: dict[str, Any] | None = None,
+                        rate_limit: str | None = None, camera: str | None = None) -> None:
+    """The checks a bench makes before it flies, but for building its pilots (`--estimate` builds none: it needs no
+    provider key): a bad value is one line, as it is for a bench that flies."""
+    from vlnpilot.bench.executors import executor_factory
+    from vlnpilot.bench.runner import check_episode_options
+    from vlnpilot.bench.suite import load_suite
+
+    parse_rate_limit(rate_limit)
+    executor_factory(executor)
+    _checked_sensors(sensors)
+    pins = suite_pins(suite)
+    check_camera(camera or pins.camera or DEFAULT_CAMERA)
+    options = _with_pins(pins, shield, dict(episode_options or {}))
+    check_detail(options.get("detail", "plain"))
+    check_episode_options(load_suite(suite), options)
+
+
 def print_report(report: BenchReport, console: Any) -> None:
     for s in report.summaries:
         lat = f", latency p50 {s.latency_p50_s:.3f} s p95 {s.latency_p95_s:.3f} s" if s.latency_p50_s is not None \

@@ -263,7 +263,7 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     suite = effective_suite(settings)
     pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url, settings.pilot_options)
     executor_factory(settings.executor)  # a bad name is refused before anything runs
-    _check_episode_options(suite, settings.episode_options)
+    check_episode_options(suite, settings.episode_options)
     _check_replayed_frames(plan(suite, pilots, settings, Path(".")))
     config = config_of(suite, pilots, settings)
     chash = config_hash(config)
@@ -357,7 +357,7 @@ def _fly(settings: BenchSettings, flight: _Flight, todo: Sequence[EpisodeSpec], 
         executor.close()
 
 
-def _check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
+def check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
     """Build one EpisodeConfig now, so that a bad shield or option is refused before anything runs."""
     from vlnpilot.episode.config import EpisodeConfig
 
