@@ -8,14 +8,25 @@ one line naming the pilot, the problem and the valid option names; a secret neve
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any, ClassVar, Literal, Self
+from typing import Annotated, Any, ClassVar, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, ValidationInfo, field_validator
+from pydantic import AfterValidator, BaseModel, ConfigDict, Field, SecretStr, ValidationError, ValidationInfo, field_validator
 
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.exits import shorten
+
+
+def bounded(low: float, high: float, unit: str) -> Any:
+    """A float option that must be finite and within low..high, a refusal naming the range (a NaN passes `ge`)."""
+    def check(value: float) -> float:
+        if not (math.isfinite(value) and low <= value <= high):
+            raise ValueError(f"must be a finite number in {low:g}..{high:g} {unit}")
+        return value
+
+    return Annotated[float, AfterValidator(check)]
 
 
 class PilotOptions(BaseModel):
