@@ -105,6 +105,7 @@ def test_its_distances_must_be_finite_and_in_range(key, value):
     from vlnpilot.core.errors import ConfigError
     from vlnpilot.pilots.oracle import OracleOptions
 
-    with pytest.raises(ConfigError, match=rf"option '{key}' of the oracle pilot: must be a finite number in [0-9.]+\.\."):
+    named = rf"option '{key}' of the oracle pilot: must be a finite number in [0-9.]+\.\."
+    with pytest.raises(ConfigError, match=named):
         OracleOptions.from_command_line("oracle", {key: value})
     assert OracleOptions.from_command_line("oracle", {key: "0.3"}) == {key: 0.3}

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Annotated, Any, ClassVar, Literal, Self
+from typing import Any, ClassVar, Literal, Self
 
 from pydantic import (
     AfterValidator,
@@ -28,14 +28,15 @@ from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.exits import shorten
 
 
-def bounded(low: float, high: float, unit: str) -> Any:
-    """A float option that must be finite and within low..high, a refusal naming the range (a NaN passes `ge`)."""
+def within(low: float, high: float, unit: str) -> AfterValidator:
+    """A float option's check: finite and within low..high, its refusal naming the range (NaN passes `ge`).
+    Use: `Annotated[float, within(0.1, 1.5, "m")]`."""
     def check(value: float) -> float:
         if not (math.isfinite(value) and low <= value <= high):
             raise ValueError(f"must be a finite number in {low:g}..{high:g} {unit}")
         return value
 
-    return Annotated[float, AfterValidator(check)]
+    return AfterValidator(check)
 
 
 class PilotOptions(BaseModel):

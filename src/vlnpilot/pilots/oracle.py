@@ -14,7 +14,7 @@ Search Open Door when no route is left, hovers while a person stands or walks in
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 from pydantic import Field
 
@@ -26,7 +26,7 @@ from vlnpilot.core.fsm import State, state_spec
 from vlnpilot.core.records import Pose, wrap_deg
 from vlnpilot.core.tello_spec import horizontal_fov_deg
 from vlnpilot.pilots.base import BasePilot, register_pilot
-from vlnpilot.pilots.options import PilotOptions, bounded
+from vlnpilot.pilots.options import PilotOptions, within
 from vlnpilot.scene.model import Door
 from vlnpilot.tasks.mission import Mission, route
 from vlnpilot.tasks.task import SuccessConfig, Task, parse_query
@@ -63,10 +63,10 @@ def _signed(code: str) -> float:
 
 
 # Distances an indoor flight can use: a doorway's approach and crossing, an object's viewing point, within a room.
-ApproachM = bounded(0.1, 1.5, "m")
-CrossM = bounded(0.1, 1.5, "m")
-ViewM = bounded(0.2, 2.0, "m")
-LateralTolM = bounded(0.0, 0.3, "m")
+ApproachM = Annotated[float, within(0.1, 1.5, "m")]
+CrossM = Annotated[float, within(0.1, 1.5, "m")]
+ViewM = Annotated[float, within(0.2, 2.0, "m")]
+LateralTolM = Annotated[float, within(0.0, 0.3, "m")]
 
 
 class OracleOptions(PilotOptions):
