@@ -6,7 +6,7 @@
     max_steps: 50
     seed: 0                       # base of the per-repetition seeds (see `episode_seed`)
     profile: paper                # FSM profile
-    spawn_jitter: {m: 0.0, deg: 0.0}   # optional seeded spawn offsets (0: every repetition starts alike)
+    spawn_jitter: {m: 0.0, deg: 0.0}   # optional seeded spawn offsets, m 0..0.5, deg 0..45 (0: alike)
     spawn_labels: {living_room: Living Room and Kitchen}   # optional display names of starting rooms
     rows:
       - {id: living-bathroom, spawn: living_room, query: Go to the bathroom, goal: {room: bathroom}}
@@ -35,6 +35,7 @@ the events of `scene.events.Scenario`; the scene is the row's), checked against 
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -296,17 +297,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     shield = _pin(data, "shield", SHIELD_REGISTRY.names(), errors)
     camera = _pin(data, "camera", CAMERAS, errors)
     randomize = _randomize_seed(data, "suite", errors)
-    jitter = data.get("spawn_jitter") or {}
-    jm = jd = 0.0
-    if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
-        errors.append(f"spawn_jitter must be a mapping with keys m and deg, got {jitter!r}")
-    else:
-        try:
-            jm, jd = float(jitter.get("m", 0.0)), float(jitter.get("deg", 0.0))
-            if jm < 0 or jd < 0:
-                raise ValueError
-        except (TypeError, ValueError):
-            errors.append(f"spawn_jitter values must be non-negative numbers, got {jitter!r}")
+    jm, jd = _spawn_jitter(data.get("spawn_jitter") or {}, errors)
     labels = data.get("spawn_labels") or {}
     valid_spawns = [s.id for s in scene.spawns]
     if not isinstance(labels, dict):
@@ -342,6 +333,25 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
                  description=str(data.get("description") or ""), source=source, refused=tuple(refused),
                  randomize=randomize)
+
+
+MAX_JITTER_M, MAX_JITTER_DEG = 0.5, 45.0  # farther, a spawn leaves its room (or the house) or faces a wall
+
+
+def _spawn_jitter(jitter: Any, errors: list[str]) -> tuple[float, float]:
+    """The suite's `spawn_jitter: {m, deg}`, each finite and within its range (0, 0 for a bad one, said in errors)."""
+    if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
+        errors.append(f"spawn_jitter must be a mapping with keys m and deg, got {jitter!r}")
+        return 0.0, 0.0
+    try:
+        jm, jd = float(jitter.get("m", 0.0)), float(jitter.get("deg", 0.0))
+    except (TypeError, ValueError, OverflowError):
+        jm = jd = math.nan
+    if not (0 <= jm <= MAX_JITTER_M and 0 <= jd <= MAX_JITTER_DEG):  # NaN fails both comparisons
+        errors.append(f"spawn_jitter must have m in 0..{MAX_JITTER_M:g} (metres) and deg in 0..{MAX_JITTER_DEG:g} "
+                      f"(degrees), finite numbers; got {jitter!r}")
+        return 0.0, 0.0
+    return jm, jd
 
 
 def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | RefusedRow | None:
