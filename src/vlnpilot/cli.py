@@ -15,6 +15,7 @@ from rich.console import Console
 from rich.markup import escape
 
 from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 
 if TYPE_CHECKING:
     from vlnpilot.pilots.base import Pilot
@@ -44,7 +45,6 @@ DetailOpt = Annotated[str | None, typer.Option("--detail", help="Scene detail th
                                                "scenes every recorded trial saw; the default) or rich (skirting, "
                                                "floorboards, switches, handles, pictures, clutter, mirrors that "
                                                "reflect: docs/scenes.md).")]
-MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PlannerOpt = Annotated[str, typer.Option("--planner", help="Who plans the mission: auto (the pilot, if it plans, "
                                         "unless the instruction is one plain goal), pilot or parser.")]
 PilotOptionOpt = Annotated[list[str] | None, typer.Option(
@@ -470,7 +470,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 @app.command("bench")
 def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",  # noqa: PLR0913, E501 - one parameter per flag (Typer)
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
-          reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
+          reps: Annotated[int | None, typer.Option("--reps", min=1, max=MAX_REPS, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,
           workers: Annotated[int | None, typer.Option("--workers", min=1, help="Episodes in flight.")] = None,
           executor: Annotated[str, typer.Option("--executor", help="local, ray, inline or one a --plugin "

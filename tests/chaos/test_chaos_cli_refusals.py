@@ -88,3 +88,9 @@ def test_an_estimate_refuses_what_a_bench_refuses(monkeypatch, capsys, option, v
 def test_an_estimate_of_a_model_pilot_still_needs_no_key(monkeypatch, capsys) -> None:
     code, out, err = run_main(monkeypatch, capsys, "bench", "--estimate", "--reps", "1", "--pilots", "openai:gpt-4.1")
     assert code == 0 and "gpt-4.1" in out, err
+
+
+# -- upper limits ---------------------------------------------------------------------------------------------------
+def test_reps_beyond_the_cap_are_refused_before_the_episodes_are_planned(monkeypatch, capsys, tmp_path) -> None:
+    err = refused(monkeypatch, capsys, "bench", "--reps", "1000000000", "--out", str(tmp_path / "hr1"))
+    assert "--reps" in err and "10000" in err and not (tmp_path / "hr1").exists()

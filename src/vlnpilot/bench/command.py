@@ -79,8 +79,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:
-        console.print(f"interrupted: finished episodes are kept in {out}/results.jsonl; continue with "
-                      f"--resume --out {out}", highlight=False)
+        console.print(_interrupted(Path(out)), highlight=False)
         raise
     print_report(report, console)
     if report.failed:
@@ -110,6 +109,13 @@ def check_bench_options(suite: str | Path = "paper", *, executor: str = "local",
     options = _with_pins(pins, shield, dict(episode_options or {}))
     check_detail(options.get("detail", "plain"))
     check_episode_options(load_suite(suite), options)
+
+
+def _interrupted(out: Path) -> str:
+    """What Ctrl-C leaves: a bench to resume, or (interrupted while it was planned) nothing to resume."""
+    if (out / MANIFEST).is_file():
+        return f"interrupted: finished episodes are kept in {out}/results.jsonl; continue with --resume --out {out}"
+    return "interrupted before the bench started: nothing was recorded, there is nothing to resume"
 
 
 def print_report(report: BenchReport, console: Any) -> None:

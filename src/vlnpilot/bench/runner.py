@@ -35,6 +35,7 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.exits import shorten
 from vlnpilot.core.fileio import write_atomic
 from vlnpilot.core.fsm import PROFILES
+from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 from vlnpilot.core.rundir import check_writable, default_run_dir, git_sha, package_versions
 from vlnpilot.pilots.ratelimit import share_budgets
 
@@ -173,11 +174,11 @@ def resolve_pilots(specs: Sequence[str], base_url: str | None,
 def effective_suite(settings: BenchSettings) -> Suite:
     suite = load_suite(settings.suite)
     changes: dict[str, Any] = {}
-    for name, attr in (("reps", "repetitions"), ("max_steps", "max_steps")):
+    for name, attr, cap in (("reps", "repetitions", MAX_REPS), ("max_steps", "max_steps", MAX_STEPS)):
         v = getattr(settings, name)
         if v is not None:
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"--{name.replace('_', '-')} must be a positive integer, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= cap:
+                raise ConfigError(f"--{name.replace('_', '-')} must be an integer in 1..{cap}, got {v!r}")
             changes[attr] = v
     if settings.seed is not None:
         changes["seed"] = int(settings.seed)

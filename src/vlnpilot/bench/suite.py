@@ -49,6 +49,7 @@ from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
 from vlnpilot.core.cameras import CAMERAS
 from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.fsm import PROFILES
+from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 from vlnpilot.prompting.context import CONTEXT_PRESETS
 from vlnpilot.safety.shields import SHIELD_REGISTRY
 from vlnpilot.scene import SCENES, Scene, load_scene
@@ -263,9 +264,10 @@ def _read(suite: str | Path) -> tuple[str, str, str]:
                      f"and no such file")
 
 
-def _int(value: Any, what: str, errors: list[str], minimum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
-        bound = f" >= {minimum}" if minimum is not None else ""
+def _int(value: Any, what: str, errors: list[str], minimum: int | None = None, maximum: int | None = None) -> int:
+    low, high = -math.inf if minimum is None else minimum, math.inf if maximum is None else maximum
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        bound = f" in {minimum}..{maximum}" if maximum is not None else f" >= {minimum}" if minimum is not None else ""
         errors.append(f"{what} must be an integer{bound}, got {value!r}")
         return minimum or 0
     return value
@@ -287,8 +289,8 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
         scene = load_scene(scene_name)
     except VLNPilotError as exc:
         raise SuiteError(f"suite {source}: {exc}") from None
-    reps = _int(data.get("repetitions", 5), "repetitions", errors, 1)
-    max_steps = _int(data.get("max_steps", 50), "max_steps", errors, 1)
+    reps = _int(data.get("repetitions", 5), "repetitions", errors, 1, MAX_REPS)
+    max_steps = _int(data.get("max_steps", 50), "max_steps", errors, 1, MAX_STEPS)  # the command line's caps
     seed = _int(data.get("seed", 0), "seed", errors)
     profile = str(data.get("profile", "paper"))
     if profile not in PROFILES:
