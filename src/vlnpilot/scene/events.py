@@ -19,6 +19,7 @@ Scenarios load from YAML (`load_scenario(FILE or built-in name)`), are checked a
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
@@ -272,6 +273,17 @@ def scene_with_recorded(name: str, scenario: dict[str, Any] | None, source: str 
     return with_scenario(scene, scenario_from_dict(scenario, source)) if scenario else scene
 
 
+def _point_problem(point: tuple[float, float], bounds: tuple[tuple[float, float], tuple[float, float]]) -> str | None:
+    """What is wrong with a path's [x, y] point, if anything: it must be finite and inside the scene (a mover walks
+    there; one outside the house was accepted, one at NaN was misreported as touching the drone's spawn)."""
+    (xmin, ymin), (xmax, ymax) = bounds
+    x, y = point
+    if math.isfinite(x) and math.isfinite(y) and xmin <= x <= xmax and ymin <= y <= ymax:
+        return None
+    return (f"path point {[x, y]} is outside the scene: x must be in {xmin:g}..{xmax:g} and y in {ymin:g}..{ymax:g} "
+            "(metres, finite)")
+
+
 def validate_scenario(scenario: Scenario, scene: Scene) -> None:
     """Refuse, in one line, an event that names a room, door or wall the scene does not have, or a path that
     does not connect (consecutive rooms must share an open door)."""
@@ -294,6 +306,9 @@ def validate_scenario(scenario: Scenario, scene: Scene) -> None:
         if e.is_mover:
             prev: str | None = None
             for p in e.path:
+                problem = None if isinstance(p, str) else _point_problem(p, scene.bounds)
+                if problem is not None:
+                    fail(e, problem)
                 if isinstance(p, str):
                     if p not in rooms and p not in doors:
                         fail(e, f"path names {p!r}, which is neither a room nor an open door; valid: "
