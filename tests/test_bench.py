@@ -322,3 +322,17 @@ def test_a_bench_without_frames_renders_no_chase_view_and_a_resume_keeps_the_cho
                   console=console)
     assert len(ResultsLog(results).read()) == 2
     assert built == [False, True, False]
+
+
+@pytest.mark.parametrize("pilots", ["oracle,ORACLE", "Oracle, oracle", "openai:gpt-4.1,OpenAI:gpt-4.1"])
+def test_a_pilot_given_twice_in_another_case_is_refused(pilots: str):
+    from vlnpilot.bench.runner import parse_pilots
+
+    with pytest.raises(ConfigError, match=r"pilot\(s\) given twice: .*not case-sensitive"):
+        parse_pilots(pilots)
+
+
+def test_models_that_differ_in_case_are_two_pilots():
+    from vlnpilot.bench.runner import parse_pilots
+
+    assert parse_pilots("files:A,files:a") == ("files:A", "files:a")  # a directory's case counts

@@ -108,13 +108,15 @@ def parse_pilots(pilots: str | Sequence[str]) -> tuple[str, ...]:
     if not all(specs):
         raise ConfigError(f"--pilots {shorten(str(pilots))!r} has an empty SPEC; write SPECs separated by single "
                           "commas, e.g. oracle,openai:gpt-4.1")
-    from vlnpilot.pilots.base import check_spec_syntax
+    from vlnpilot.pilots.base import check_spec_syntax, parse_spec
 
     for spec in specs:
         check_spec_syntax(spec)
-    dupes = sorted({p for p in specs if specs.count(p) > 1})
+    keys = [parse_spec(p) for p in specs]  # a pilot's name in any case is the same pilot (the model's case counts)
+    dupes = [p for i, p in enumerate(specs) if keys.index(keys[i]) != i]
     if dupes:
-        raise ConfigError(f"pilot(s) given twice: {', '.join(dupes)}")
+        raise ConfigError(f"pilot(s) given twice: {', '.join(dupes)} (names are not case-sensitive); give each "
+                          "pilot once")
     return tuple(specs)
 
 
