@@ -14,6 +14,7 @@ import typer
 from rich.console import Console
 from rich.markup import escape
 
+from vlnpilot.cli_usage import ListingGroup, usage_message
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 
@@ -22,8 +23,8 @@ if TYPE_CHECKING:
     from vlnpilot.scene import Scene
 
 app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
-                  add_completion=False, pretty_exceptions_enable=False)
-scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True)
+                  add_completion=False, pretty_exceptions_enable=False, cls=ListingGroup)
+scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True, cls=ListingGroup)
 app.add_typer(scene_app, name="scene")
 console = Console(soft_wrap=True)
 err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wrapping at 80 columns)
@@ -643,7 +644,7 @@ def main() -> None:
         exc.show()
         sys.exit(exc.exit_code)
     except ClickException as exc:
-        _one_line_error(exc.format_message())
+        _one_line_error(usage_message(exc))
         sys.exit(exc.exit_code)
     except (KeyboardInterrupt, typer.Abort):
         err_console.print("interrupted: every step recorded so far is kept")

@@ -94,3 +94,15 @@ def test_an_estimate_of_a_model_pilot_still_needs_no_key(monkeypatch, capsys) ->
 def test_reps_beyond_the_cap_are_refused_before_the_episodes_are_planned(monkeypatch, capsys, tmp_path) -> None:
     err = refused(monkeypatch, capsys, "bench", "--reps", "1000000000", "--out", str(tmp_path / "hr1"))
     assert "--reps" in err and "10000" in err and not (tmp_path / "hr1").exists()
+
+
+# -- unknown commands and options name the valid ones -----------------------------------------------------------------
+@pytest.mark.parametrize(("args", "lists"), [
+    (["bogus"], "Valid commands: run, plan, watch, report, bench, tello-emulator, serve, scene"),
+    (["scene", "bogus"], "Valid commands: info, render"),
+    (["--bogus"], "the valid options: see vln-pilot --help"),
+    (["scene", "info", "--bogus"], "the valid options: see vln-pilot scene info --help"),
+    (["run", Q, "--pilto", "oracle"], "Possible options: --pilot"),
+])
+def test_an_unknown_command_or_option_names_where_the_valid_ones_are(monkeypatch, capsys, args, lists) -> None:
+    assert lists in refused(monkeypatch, capsys, *args)
