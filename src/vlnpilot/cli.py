@@ -145,11 +145,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator), tello or a "
                                            "registered one.")] = "sim",
         tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
-        judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
-                                           "declared outcome.")] = "ask",
+        judge: Annotated[str | None, typer.Option("--judge", help="ask (the default) or none: the operator confirms "
+                                                  "a Tello's declared outcome (a robot without ground truth).")] = None,
         live: Annotated[bool, typer.Option("--live", help="Serve the live ground station while it flies.")] = False,
-        live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
-        live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
+        live_port: Annotated[int | None, typer.Option("--live-port", min=0, max=65535, help="With --live (default "
+                                                      "8765).")] = None,
+        live_host: Annotated[str | None, typer.Option("--live-host", help="With --live (default 127.0.0.1); off "
+                                                      "loopback, set VLN_LIVE_TOKEN.")] = None,
         planner: PlannerOpt = "auto",
         camera: CameraOpt = None,
         camera_lag_ms: CameraLagOpt = None,
@@ -188,7 +190,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     detail = _checked_detail(detail or recorded.get("detail") or "plain", robot)
     shield = shield or recorded.get("shield") or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
-    judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
+    judge_outcome = make_judge(judge or "ask", operator)  # validated for every robot, used without ground truth
+    _refuse_unused(live, live_port, live_host, judge, capabilities.ground_truth)
 
     sc = _with_events(load_scene(scene), events, recorded_scenario(pilot), robot)
     spawn_id = spawn or sc.spawns[0].id
@@ -220,7 +223,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
-    station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
+    station = _live_station(live, run_dir, pilot_obj, sc, live_host or "127.0.0.1", 8765 if live_port is None
+                            else live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / "robot_events.jsonl",
                                         operator=operator, sensors=sensors, camera=camera,
                                         camera_lag_ms=camera_lag_ms, randomize=randomize, detail=detail) as env:
@@ -281,6 +285,20 @@ def _with_events(sc: Scene, events: str | None, recorded: dict | None, robot: st
         raise ConfigError(f"--events needs the simulator (--robot sim); the {robot} flies in a real room")
     scenario = load_scenario(events) if events is not None else scenario_from_dict(recorded, "of the recording")
     return with_scenario(sc, scenario)
+
+
+def _refuse_unused(live: bool, live_port: int | None, live_host: str | None, judge: str | None,
+                   ground_truth: bool) -> None:
+    """An option that would change nothing is refused in one line, rather than silently ignored."""
+    from vlnpilot.core.errors import ConfigError
+
+    given = [name for name, value in (("--live-port", live_port), ("--live-host", live_host)) if value is not None]
+    if given and not live:
+        raise ConfigError(f"{' and '.join(given)} without --live would change nothing (they set the live "
+                          "station): add --live, or drop them")
+    if judge is not None and ground_truth:
+        raise ConfigError(f"--judge {judge} applies to a robot without ground truth (--robot tello): the simulator "
+                          "judges every declared outcome itself; drop --judge")
 
 
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
@@ -533,7 +551,7 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
         check_base_url(base_url)
         parse_option_pairs(pilot_option or ())
         check_bench_options(suite, executor=executor, shield=shield, sensors=sensors, episode_options=options,
-                            rate_limit=rate_limit, camera=camera)
+                            rate_limit=rate_limit, camera=camera, ray_address=ray_address)
         estimate_command(suite, pilots, reps=reps, max_steps=max_steps, profile=profile, context=options["context"],
                          console=console)
         raise typer.Exit(0)

@@ -106,3 +106,17 @@ def test_reps_beyond_the_cap_are_refused_before_the_episodes_are_planned(monkeyp
 ])
 def test_an_unknown_command_or_option_names_where_the_valid_ones_are(monkeypatch, capsys, args, lists) -> None:
     assert lists in refused(monkeypatch, capsys, *args)
+
+
+# -- options that would change nothing ------------------------------------------------------------------------------
+@pytest.mark.parametrize(("args", "named"), [
+    (["run", Q, *FLY, "--live-port", "9999"], "--live-port without --live"),
+    (["run", Q, *FLY, "--live-host", "127.0.0.1"], "--live-host without --live"),
+    (["run", Q, *FLY, "--judge", "none"], "--judge none applies to a robot without ground truth"),
+    (["bench", "--reps", "1", "--ray-address", "127.0.0.1:1"], "--ray-address applies to --executor ray"),
+    (["bench", "--estimate", "--ray-address", "127.0.0.1:1"], "--ray-address applies to --executor ray"),
+])
+def test_an_option_that_would_be_ignored_is_refused(monkeypatch, capsys, tmp_path, args, named) -> None:
+    out = tmp_path / "ignored"
+    assert named in refused(monkeypatch, capsys, *args, *([] if "--estimate" in args else ["--out", str(out)]))
+    assert not out.exists()
