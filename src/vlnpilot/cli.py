@@ -13,8 +13,10 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.console import Console
 from rich.markup import escape
+from typer._click import Command, Context
+from typer._click.exceptions import ClickException, NoSuchOption, UsageError
+from typer.core import TyperGroup
 
-from vlnpilot.cli_usage import ListingGroup, usage_message
 from vlnpilot.core.errors import VLNPilotError
 from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 
@@ -22,9 +24,39 @@ if TYPE_CHECKING:
     from vlnpilot.pilots.base import Pilot
     from vlnpilot.scene import Scene
 
+
+class _ListingGroup(TyperGroup):
+    """A command group whose "No such command" line ends with the valid commands (one line, exit code 2)."""
+
+    def resolve_command(self, ctx: Context, args: list[str]) -> tuple[str | None, Command | None, list[str]]:
+        try:
+            return super().resolve_command(ctx, args)
+        except UsageError as exc:
+            if args and not args[0].startswith("-") and self.get_command(ctx, args[0]) is None:
+                exc.message = f"{exc.message} Valid commands: {', '.join(self.list_commands(ctx))}."
+            raise
+
+
+def _usage_message(exc: ClickException) -> str:
+    """The framework's message, with where to find the valid options when it suggests none."""
+    message = exc.format_message()
+    if isinstance(exc, NoSuchOption) and not exc.possibilities:
+        message = f"{message}; the valid options: see {_command_line(exc.ctx)} --help"
+    return message
+
+
+def _command_line(ctx: Context | None) -> str:
+    """`vln-pilot` and the subcommands of `ctx` (the program's own name varies: `python -m vlnpilot`...)."""
+    names = []
+    while ctx is not None and ctx.parent is not None:
+        names.append(ctx.info_name or "")
+        ctx = ctx.parent
+    return " ".join(["vln-pilot", *reversed(names)])
+
+
 app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
-                  add_completion=False, pretty_exceptions_enable=False, cls=ListingGroup)
-scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True, cls=ListingGroup)
+                  add_completion=False, pretty_exceptions_enable=False, cls=_ListingGroup)
+scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True, cls=_ListingGroup)
 app.add_typer(scene_app, name="scene")
 console = Console(soft_wrap=True)
 err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wrapping at 80 columns)
@@ -632,7 +664,7 @@ def main() -> None:
     130 interrupted.
     """
     # Typer >= 0.29 (pinned in pyproject.toml) vendors click as typer._click; Abort lives in typer itself.
-    from typer._click.exceptions import ClickException, NoArgsIsHelpError
+    from typer._click.exceptions import NoArgsIsHelpError
 
     try:
         with _sigterm_interrupts():  # every command, from start-up on: SIGTERM is Ctrl-C
@@ -662,7 +694,7 @@ def main() -> None:
         exc.show()
         sys.exit(exc.exit_code)
     except ClickException as exc:
-        _one_line_error(usage_message(exc))
+        _one_line_error(_usage_message(exc))
         sys.exit(exc.exit_code)
     except (KeyboardInterrupt, typer.Abort):
         err_console.print("interrupted: every step recorded so far is kept")
