@@ -88,7 +88,7 @@ def test_invalid_suite_is_refused_before_anything_runs(tmp_path: Path):
 def test_suite_keys_ids_and_numbers_are_checked():
     with pytest.raises(SuiteError, match=r"unknown key\(s\) 'repetition'; valid keys: name"):
         suite_from_dict({"repetition": 3, "rows": [{"spawn": "bedroom", "query": "Go to the bedroom"}]})
-    with pytest.raises(SuiteError, match="repetitions must be an integer >= 1"):
+    with pytest.raises(SuiteError, match="repetitions must be an integer in 1..10000"):
         suite_from_dict({"repetitions": 0, "rows": [{"spawn": "bedroom", "query": "Go to the bedroom"}]})
     with pytest.raises(SuiteError, match="row 2 \\(a\\): the id is also used by row 1"):
         suite_from_dict({"rows": [{"id": "a", "spawn": "bedroom", "query": "Go to the bedroom"},
@@ -322,3 +322,17 @@ def test_a_bench_without_frames_renders_no_chase_view_and_a_resume_keeps_the_cho
                   console=console)
     assert len(ResultsLog(results).read()) == 2
     assert built == [False, True, False]
+
+
+@pytest.mark.parametrize("pilots", ["oracle,ORACLE", "Oracle, oracle", "openai:gpt-4.1,OpenAI:gpt-4.1"])
+def test_a_pilot_given_twice_in_another_case_is_refused(pilots: str):
+    from vlnpilot.bench.runner import parse_pilots
+
+    with pytest.raises(ConfigError, match=r"pilot\(s\) given twice: .*not case-sensitive"):
+        parse_pilots(pilots)
+
+
+def test_models_that_differ_in_case_are_two_pilots():
+    from vlnpilot.bench.runner import parse_pilots
+
+    assert parse_pilots("files:A,files:a") == ("files:A", "files:a")  # a directory's case counts

@@ -311,6 +311,23 @@ def test_pilot_error_on_a_fatal_error_asks_once_and_moves_nothing_more(geo: Simu
     assert env.executed == [(1, "C1")]
 
 
+def test_pilot_error_when_no_step_got_a_decision_before_the_step_limit(geo: Simulator) -> None:
+    """An unreachable provider: every call a transient connection error, too few in a row to end the episode."""
+    pilot = ScriptedPilot([], default=PilotError("connection refused", reason="connection_error"))
+    result = run_episode(geo, pilot, parse_query("Go to the bathroom", geo.scene), EpisodeConfig(max_steps=2),
+                         spawn="living_room")
+    assert (result.outcome, result.steps) == ("pilot_error", 2)
+    assert result.reason == "no valid decision in any of the 2 steps"
+
+
+def test_the_step_limit_stays_max_steps_when_one_step_got_a_decision(geo: Simulator) -> None:
+    pilot = ScriptedPilot([answer("C1", "Recognize Room")],
+                          default=PilotError("connection refused", reason="connection_error"))
+    result = run_episode(geo, pilot, parse_query("Go to the bathroom", geo.scene), EpisodeConfig(max_steps=2),
+                         spawn="living_room")
+    assert result.outcome == "max_steps"
+
+
 def test_pilot_error_after_repeated_invalid_answers(geo: Simulator) -> None:
     pilot = ScriptedPilot([], default=answer("A3", "Land"))
     env = SpyEnv(geo, pilot)

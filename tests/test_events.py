@@ -86,6 +86,9 @@ def test_a_bad_scenario_is_refused_in_one_line(events: list, says: str) -> None:
     ({"kind": "lights_out", "room": "attic", "level": "dark"}, "unknown room 'attic'"),
     ({"kind": "pet", "path": ["bedroom"], "trigger": {"enter": "garage"}}, "unknown trigger room"),
     ({"kind": "sign", "room": "bedroom", "text": "x", "at": [1.0, 1.0]}, "is not in the room bedroom"),
+    ({"kind": "person", "path": [[1000, 1000], "bathroom"]}, r"path point \[1000.0, 1000.0\] is outside the scene: x "
+                                                            r"must be in -0.15..8.75 and y in -0.15..3.75"),
+    ({"kind": "pet", "path": [[math.nan, math.inf], "bathroom"]}, r"path point \[nan, inf\] is outside the scene"),
 ])
 def test_a_scenario_that_does_not_fit_its_scene_is_refused(event: dict, says: str) -> None:
     with pytest.raises(ConfigError, match=says):

@@ -185,3 +185,13 @@ def test_run_live_prints_the_address_and_flies(tmp_path: Path, monkeypatch: pyte
     out = capsys.readouterr().out
     assert info.value.code == 0 and "live station: http://127.0.0.1:" in out
     assert load_run(tmp_path / "r")[0]["status"] == "finished"
+
+
+def test_a_read_only_station_off_loopback_without_a_token_says_what_it_would_expose(monkeypatch, tmp_path) -> None:
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.live.station import TOKEN_ENV, LiveStation
+
+    monkeypatch.delenv(TOKEN_ENV, raising=False)
+    with pytest.raises(ConfigError, match="would let anyone who reaches it see the run") as info:
+        LiveStation(tmp_path, host="0.0.0.0")  # noqa: S104 - refused before it binds
+    assert "fly" not in str(info.value)  # `watch` is read-only: nobody could fly anything through it

@@ -30,9 +30,9 @@ def test_registered_and_validated():
 def test_same_seed_same_episode(geo_sim):
     a, pa = _fly(geo_sim, "Go to the bathroom", "living_room", seed=11)
     b, pb = _fly(geo_sim, "Go to the bathroom", "living_room", seed=11)
-    assert pa.plan() == pb.plan()
+    assert pa.drawn_failures() == pb.drawn_failures()
     assert (a.outcome, a.steps, a.path_length_m) == (b.outcome, b.steps, b.path_length_m)
-    plans = {repr(_fly(geo_sim, "Go to the bathroom", "living_room", seed=s)[1].plan()) for s in range(12)}
+    plans = {repr(_fly(geo_sim, "Go to the bathroom", "living_room", seed=s)[1].drawn_failures()) for s in range(12)}
     assert len(plans) > 3  # the seed matters
 
 
@@ -43,7 +43,7 @@ def test_noiseless_is_the_oracle(geo_sim):
 
 def test_offset_crossing_collides_without_the_shield_and_succeeds_with_it(geo_sim):
     off, pilot = _fly(geo_sim, "Go to the bedroom", "living_room", seed=2, p_offset=1.0, p_strict=0.0, p_early=0.0)
-    assert abs(pilot.plan()["offsets"]["door_living_bedroom"]) >= 0.36
+    assert abs(pilot.drawn_failures()["offsets"]["door_living_bedroom"]) >= 0.36
     assert off.outcome == "collision" and off.contact.startswith("door_living_bedroom")
     on, _ = _fly(geo_sim, "Go to the bedroom", "living_room", seed=2, shield="geometry", p_offset=1.0, p_strict=0.0,
                  p_early=0.0)
@@ -63,3 +63,24 @@ def test_early_final_state_is_a_false_success(geo_sim):
     assert room.outcome == "false_success" and room.final_state == "Stay on Room"
     obj, _ = _fly(geo_sim, "Find the refrigerator", "living_room", seed=4, p_offset=0, p_strict=0, p_early=1.0)
     assert obj.outcome == "false_success" and obj.final_state == "Describe Object"
+
+
+def test_it_is_no_mission_planner_so_the_parser_plans_for_it():
+    from vlnpilot.pilots.planning import can_plan, plan_instruction
+    from vlnpilot.scene import load_scene
+
+    pilot = make_pilot("noisy-oracle")
+    assert not can_plan(pilot)  # its drawn failures are not a planning call
+    scene = load_scene("cabin")
+    mission, _ = plan_instruction("Go to the bathroom, then come back", scene, "living_room", pilot)
+    assert len(mission.stages) == 2
+
+
+def test_it_flies_a_mission_stage_by_stage_as_the_oracle_does(geo_sim):
+    from vlnpilot.tasks.mission_parser import plan_mission
+
+    # the whole query is no one-goal query (the parser reads "fridge ... bathroom" as a fridge in the bathroom)
+    mission = plan_mission("Find the fridge and then go to the bathroom", geo_sim.scene, "living_room")
+    pilot = make_pilot("noisy-oracle", p_offset=0, p_strict=0, p_early=0)
+    result = run_episode(geo_sim, pilot, mission, EpisodeConfig(seed=1), spawn="living_room")
+    assert result.outcome == "success" and result.stages_reached == 2

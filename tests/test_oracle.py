@@ -97,3 +97,15 @@ def test_oracle_needs_ground_truth(scene) -> None:
                      state=State.RECOGNIZE_ROOM, previous_movement=None, step=1)
     with pytest.raises(VLNPilotError, match="attach"):
         pilot.decide(pin)
+
+
+@pytest.mark.parametrize(("key", "value"), [("approach_m", "nan"), ("approach_m", "inf"), ("approach_m", "-1"),
+                                            ("view_m", "nan"), ("cross_m", "1e308"), ("lateral_tol_m", "0.5")])
+def test_its_distances_must_be_finite_and_in_range(key, value):
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.pilots.oracle import OracleOptions
+
+    named = rf"option '{key}' of the oracle pilot: must be a finite number in [0-9.]+\.\."
+    with pytest.raises(ConfigError, match=named):
+        OracleOptions.from_command_line("oracle", {key: value})
+    assert OracleOptions.from_command_line("oracle", {key: "0.3"}) == {key: 0.3}

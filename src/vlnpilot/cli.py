@@ -13,16 +13,50 @@ from typing import TYPE_CHECKING, Annotated, Any
 import typer
 from rich.console import Console
 from rich.markup import escape
+from typer._click import Command, Context
+from typer._click.exceptions import ClickException, NoSuchOption, UsageError
+from typer.core import TyperGroup
 
 from vlnpilot.core.errors import VLNPilotError
+from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 
 if TYPE_CHECKING:
     from vlnpilot.pilots.base import Pilot
     from vlnpilot.scene import Scene
 
+
+class _ListingGroup(TyperGroup):
+    """A command group whose "No such command" line ends with the valid commands (one line, exit code 2)."""
+
+    def resolve_command(self, ctx: Context, args: list[str]) -> tuple[str | None, Command | None, list[str]]:
+        try:
+            return super().resolve_command(ctx, args)
+        except UsageError as exc:
+            if args and not args[0].startswith("-") and self.get_command(ctx, args[0]) is None:
+                exc.message = f"{exc.message} Valid commands: {', '.join(self.list_commands(ctx))}."
+            raise
+
+
+def _usage_message(exc: ClickException) -> str:
+    """The framework's message, with where to find the valid options when it suggests none."""
+    message = exc.format_message()
+    if isinstance(exc, NoSuchOption) and not exc.possibilities:
+        message = f"{message}; the valid options: see {_command_line(exc.ctx)} --help"
+    return message
+
+
+def _command_line(ctx: Context | None) -> str:
+    """`vln-pilot` and the subcommands of `ctx` (the program's own name varies: `python -m vlnpilot`...)."""
+    names = []
+    while ctx is not None and ctx.parent is not None:
+        names.append(ctx.info_name or "")
+        ctx = ctx.parent
+    return " ".join(["vln-pilot", *reversed(names)])
+
+
 app = typer.Typer(help="VLN-Pilot: a vision-language model pilots an indoor drone.", no_args_is_help=True,
-                  add_completion=False, pretty_exceptions_enable=False)
-scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True)
+                  add_completion=False, pretty_exceptions_enable=False, cls=_ListingGroup)
+scene_app = typer.Typer(help="Inspect and render the built-in scenes.", no_args_is_help=True, cls=_ListingGroup)
 app.add_typer(scene_app, name="scene")
 console = Console(soft_wrap=True)
 err_console = Console(stderr=True, soft_wrap=True)  # one error, one line (no wrapping at 80 columns)
@@ -44,7 +78,6 @@ DetailOpt = Annotated[str | None, typer.Option("--detail", help="Scene detail th
                                                "scenes every recorded trial saw; the default) or rich (skirting, "
                                                "floorboards, switches, handles, pictures, clutter, mirrors that "
                                                "reflect: docs/scenes.md).")]
-MAX_STEPS = 100_000  # a bound that no flight reaches (a Tello battery lasts about 400 steps), far below overflow
 PlannerOpt = Annotated[str, typer.Option("--planner", help="Who plans the mission: auto (the pilot, if it plans, "
                                         "unless the instruction is one plain goal), pilot or parser.")]
 PilotOptionOpt = Annotated[list[str] | None, typer.Option(
@@ -126,7 +159,7 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         spawn: Annotated[str | None, typer.Option("--spawn", help="Spawn point name.")] = None,
         pilot: Annotated[str | None, typer.Option("--pilot", help="Pilot SPEC: name or name:model.")] = None,
         max_steps: Annotated[int, typer.Option("--max-steps", min=1, max=MAX_STEPS, help="Step limit.")] = 50,
-        seed: Annotated[int | None, typer.Option("--seed")] = None,
+        seed: Annotated[int | None, typer.Option("--seed", min=0, help="Seed of the episode (0 or more).")] = None,
         out: OutOpt = None,
         base_url: Annotated[str | None, typer.Option("--base-url", help="OpenAI-compatible server URL.")] = None,
         pilot_option: PilotOptionOpt = None,
@@ -146,11 +179,13 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
         robot: Annotated[str, typer.Option("--robot", help="sim (the embedded simulator), tello or a "
                                            "registered one.")] = "sim",
         tello_host: Annotated[str | None, typer.Option("--tello-host", help="The Tello's address.")] = None,
-        judge: Annotated[str, typer.Option("--judge", help="ask or none: the operator confirms a Tello's "
-                                           "declared outcome.")] = "ask",
+        judge: Annotated[str | None, typer.Option("--judge", help="ask (the default) or none: the operator confirms "
+                                                  "a Tello's declared outcome (a robot without ground truth).")] = None,
         live: Annotated[bool, typer.Option("--live", help="Serve the live ground station while it flies.")] = False,
-        live_port: Annotated[int, typer.Option("--live-port", min=0, max=65535)] = 8765,
-        live_host: Annotated[str, typer.Option("--live-host", help="Off loopback, set VLN_LIVE_TOKEN.")] = "127.0.0.1",
+        live_port: Annotated[int | None, typer.Option("--live-port", min=0, max=65535, help="With --live (default "
+                                                      "8765).")] = None,
+        live_host: Annotated[str | None, typer.Option("--live-host", help="With --live (default 127.0.0.1); off "
+                                                      "loopback, set VLN_LIVE_TOKEN.")] = None,
         planner: PlannerOpt = "auto",
         camera: CameraOpt = None,
         camera_lag_ms: CameraLagOpt = None,
@@ -189,7 +224,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
     detail = _checked_detail(detail or recorded.get("detail") or "plain", robot)
     shield = shield or recorded.get("shield") or default_shield(capabilities.ground_truth)
     operator = ConsoleOperator()
-    judge_outcome = make_judge(judge, operator)  # validated for every robot, used where there is no ground truth
+    judge_outcome = make_judge(judge or "ask", operator)  # validated for every robot, used without ground truth
+    _refuse_unused(live, live_port, live_host, judge, capabilities.ground_truth)
 
     sc = _with_events(load_scene(scene), events, recorded_scenario(pilot), robot)
     spawn_id = spawn or sc.spawns[0].id
@@ -221,7 +257,8 @@ def run(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to 
                       f"-> {rec['next_state'] or '-':<27} room={escape(str(d.get('room', '?'))):<12}{fail}{hit} "
                       f"[dim]{escape((d.get('description') or '')[:70])}[/dim]", highlight=False)
 
-    station = _live_station(live, run_dir, pilot_obj, sc, live_host, live_port)
+    station = _live_station(live, run_dir, pilot_obj, sc, live_host or "127.0.0.1", 8765 if live_port is None
+                            else live_port)
     with station as control, open_robot(robot, sc, tello_host=tello_host, event_log=run_dir / ROBOT_EVENTS,
                                         operator=operator, sensors=sensors, camera=camera,
                                         camera_lag_ms=camera_lag_ms, randomize=randomize, detail=detail) as env:
@@ -284,6 +321,20 @@ def _with_events(sc: Scene, events: str | None, recorded: dict | None, robot: st
     return with_scenario(sc, scenario)
 
 
+def _refuse_unused(live: bool, live_port: int | None, live_host: str | None, judge: str | None,
+                   ground_truth: bool) -> None:
+    """An option that would change nothing is refused in one line, rather than silently ignored."""
+    from vlnpilot.core.errors import ConfigError
+
+    given = [name for name, value in (("--live-port", live_port), ("--live-host", live_host)) if value is not None]
+    if given and not live:
+        raise ConfigError(f"{' and '.join(given)} without --live would change nothing (they set the live "
+                          "station): add --live, or drop them")
+    if judge is not None and ground_truth:
+        raise ConfigError(f"--judge {judge} applies to a robot without ground truth (--robot tello): the simulator "
+                          "judges every declared outcome itself; drop --judge")
+
+
 def _live_station(live: bool, run_dir: Path, pilot: Pilot, scene: Scene, host: str, port: int):
     """The live ground station's control for `run --live` (vlnpilot.live), else no control."""
     if not live:
@@ -323,20 +374,14 @@ def plan(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to
          planner: PlannerOpt = "pilot",
          as_json: Annotated[bool, typer.Option("--json", help="Print the mission as JSON.")] = False) -> None:
     """Print the plan of an instruction against a scene's map, and fly nothing. Exit code 2 if it is refused."""
-    from vlnpilot.core.exits import check_base_url
-    from vlnpilot.pilots.base import make_pilot
-    from vlnpilot.pilots.planning import can_plan, plan_instruction
+    from vlnpilot.pilots.planning import can_plan, check_planner, plan_instruction
     from vlnpilot.scene import load_scene
 
+    check_planner(planner)  # checked even when the parser plans, as `run` checks it
     sc = load_scene(scene)
     spawn_id = spawn or sc.spawns[0].id
     sc.spawn(spawn_id)
-    pilot_obj = None
-    if pilot is not None:
-        options = _pilot_options(pilot, pilot_option)
-        if base_url:
-            options["base_url"] = check_base_url(base_url)
-        pilot_obj = make_pilot(pilot, **options)
+    pilot_obj = _planning_pilot(pilot, base_url, pilot_option)
     mission, _ = plan_instruction(query, sc, sc.spawn(spawn_id).room, pilot_obj,
                                   planner=planner if can_plan(pilot_obj) else "parser",
                                   say=lambda line: err_console.print(escape(line)))
@@ -346,6 +391,25 @@ def plan(query: Annotated[str, typer.Argument(help='The instruction, e.g. "Go to
     console.print(f"plan of {escape(repr(query))} in {escape(sc.name)} from {escape(spawn_id)} "
                   f"(by {escape(mission.source)}):")
     console.print(escape(mission.describe()))
+
+
+def _planning_pilot(spec: str | None, base_url: str | None, pairs: list[str] | None) -> Pilot | None:
+    """`plan`'s pilot from its options; without --pilot the parser plans, and an option for a pilot is refused
+    (it would configure nothing)."""
+    from vlnpilot.core.errors import ConfigError
+    from vlnpilot.core.exits import check_base_url
+    from vlnpilot.pilots.base import make_pilot
+
+    if spec is None:
+        given = [name for name, value in (("--base-url", base_url), ("--pilot-option", pairs)) if value]
+        if given:
+            raise ConfigError(f"{' and '.join(given)} given without --pilot: give the pilot that plans too, e.g. "
+                              "--pilot openai:gpt-4.1 (without one the parser plans, and it takes no options)")
+        return None
+    options = _pilot_options(spec, pairs)
+    if base_url:
+        options["base_url"] = check_base_url(base_url)
+    return make_pilot(spec, **options)
 
 
 def _pilot_options(spec: str, pairs: list[str] | None) -> dict:
@@ -463,7 +527,7 @@ def report(run_dir: Annotated[Path, typer.Argument(help="A run directory (or a b
 @app.command("bench")
 def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEEDS] or a YAML file.")] = "paper",  # noqa: PLR0913, E501 - one parameter per flag (Typer)
           pilots: Annotated[str, typer.Option("--pilots", help="Pilot SPECs, comma-separated.")] = "oracle",
-          reps: Annotated[int | None, typer.Option("--reps", min=1, help="Repetitions per row.")] = None,
+          reps: Annotated[int | None, typer.Option("--reps", min=1, max=MAX_REPS, help="Repetitions per row.")] = None,
           max_steps: Annotated[int | None, typer.Option("--max-steps", min=1, max=MAX_STEPS)] = None,
           workers: Annotated[int | None, typer.Option("--workers", min=1, help="Episodes in flight.")] = None,
           executor: Annotated[str, typer.Option("--executor", help="local, ray, inline or one a --plugin "
@@ -471,7 +535,8 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
           ray_address: Annotated[str | None, typer.Option("--ray-address")] = None,
           out: OutOpt = None,
           resume: Annotated[bool, typer.Option("--resume", help="Run only the episodes missing in --out.")] = False,
-          seed: Annotated[int | None, typer.Option("--seed", help="Base seed of the repetitions.")] = None,
+          seed: Annotated[int | None, typer.Option("--seed", min=0, help="Base seed of the repetitions "
+                                                                    "(0 or more).")] = None,
           profile: Annotated[str | None, typer.Option("--profile", help=PROFILE_HELP)] = None,
           base_url: Annotated[str | None, typer.Option("--base-url")] = None,
           pilot_option: PilotOptionOpt = None,
@@ -517,9 +582,14 @@ def bench(suite: Annotated[str, typer.Option("--suite", help="paper, houses[:SEE
     options["context"] = context or pins.context or DEFAULT_CONTEXT
     if detail is not None and _checked_detail(detail, "sim") != "plain":  # plain: benches before it hash alike
         options["detail"] = detail
-    if estimate:
+    if estimate:  # checked as a bench that flies checks them, but for its pilots' keys (it counts offline)
+        from vlnpilot.bench.command import check_bench_options
         from vlnpilot.bench.estimate import estimate_command
 
+        check_base_url(base_url)
+        parse_option_pairs(pilot_option or ())
+        check_bench_options(suite, executor=executor, shield=shield, sensors=sensors, episode_options=options,
+                            rate_limit=rate_limit, camera=camera, ray_address=ray_address)
         estimate_command(suite, pilots, reps=reps, max_steps=max_steps, profile=profile, context=options["context"],
                          console=console)
         raise typer.Exit(0)
@@ -600,7 +670,7 @@ def main() -> None:
     130 interrupted.
     """
     # Typer >= 0.29 (pinned in pyproject.toml) vendors click as typer._click; Abort lives in typer itself.
-    from typer._click.exceptions import ClickException, NoArgsIsHelpError
+    from typer._click.exceptions import NoArgsIsHelpError
 
     try:
         with _sigterm_interrupts():  # every command, from start-up on: SIGTERM is Ctrl-C
@@ -618,11 +688,19 @@ def main() -> None:
             raise
         _one_line_error(message)
         sys.exit(2)
+    except OSError as exc:  # a path argument too long for the file system: one line; any other is a fault
+        from vlnpilot.core.exits import path_error_message
+
+        message = path_error_message(exc)
+        if message is None:
+            raise
+        _one_line_error(message)
+        sys.exit(2)
     except NoArgsIsHelpError as exc:  # a bare `vln-pilot`: the help, as before
         exc.show()
         sys.exit(exc.exit_code)
     except ClickException as exc:
-        _one_line_error(exc.format_message())
+        _one_line_error(_usage_message(exc))
         sys.exit(exc.exit_code)
     except (KeyboardInterrupt, typer.Abort):
         err_console.print("interrupted: every step recorded so far is kept")

@@ -207,4 +207,4 @@ def test_the_process_exits_at_once_although_a_call_still_hangs(tmp_path) -> None
     finally:
         proc.kill()
     assert proc.returncode == 0, err
-    assert out.split() == ["max_steps", "1"]
+    assert out.split() == ["pilot_error", "1"]  # its one step got no decision: the pilot failed, not the flight

@@ -48,6 +48,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     come as keywords of `more` (the signature's ceiling, pyproject's max-args, is not raised for them).
     """
     frames, rate_limit = _more_settings(more)
+    check_ray_address(executor, ray_address)
     limit = parse_rate_limit(rate_limit)  # a bad value: one line, before anything runs
     if console is None:
         from rich.console import Console
@@ -79,8 +80,7 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
     try:
         report = run_bench(settings, console=console)
     except KeyboardInterrupt:
-        console.print(f"interrupted: finished episodes are kept in {out}/results.jsonl; continue with "
-                      f"--resume --out {out}", highlight=False)
+        console.print(_interrupted(Path(out)), highlight=False)
         raise
     print_report(report, console)
     if report.failed:
@@ -91,6 +91,41 @@ def bench_command(suite: str | Path = "paper", pilots: str | Sequence[str] = "or
         raise BenchError(f"{len(keys)} episode(s) did not finish:\n  {shown}{rest}\n"
                          f"every finished episode is recorded; rerun with --resume --out {report.out} to fly the rest")
     return report.out
+
+
+def check_ray_address(executor: str, ray_address: str | None) -> None:
+    """--ray-address with an executor that ignores it (local, inline) is refused: it would silently change nothing."""
+    if ray_address is not None and executor in ("local", "inline"):
+        raise ConfigError(f"--ray-address applies to --executor ray (here: {executor}); add --executor ray, or drop "
+                          "--ray-address")
+
+
+def check_bench_options(suite: str | Path = "paper", *, executor: str = "local", shield: str | None = None,
+                        sensors: str = "none", episode_options: dict[str, Any] | None = None,
+                        rate_limit: str | None = None, camera: str | None = None,
+                        ray_address: str | None = None) -> None:
+    """The checks a bench makes before it flies, but for building its pilots (`--estimate` builds none: it needs no
+    provider key): a bad value is one line, as it is for a bench that flies."""
+    from vlnpilot.bench.executors import executor_factory
+    from vlnpilot.bench.runner import check_episode_options
+    from vlnpilot.bench.suite import load_suite
+
+    parse_rate_limit(rate_limit)
+    executor_factory(executor)
+    check_ray_address(executor, ray_address)
+    _checked_sensors(sensors)
+    pins = suite_pins(suite)
+    check_camera(camera or pins.camera or DEFAULT_CAMERA)
+    options = _with_pins(pins, shield, dict(episode_options or {}))
+    check_detail(options.get("detail", "plain"))
+    check_episode_options(load_suite(suite), options)
+
+
+def _interrupted(out: Path) -> str:
+    """What Ctrl-C leaves: a bench to resume, or (interrupted while it was planned) nothing to resume."""
+    if (out / MANIFEST).is_file():
+        return f"interrupted: finished episodes are kept in {out}/results.jsonl; continue with --resume --out {out}"
+    return "interrupted before the bench started: nothing was recorded, there is nothing to resume"
 
 
 def print_report(report: BenchReport, console: Any) -> None:

@@ -35,6 +35,7 @@ from vlnpilot.core.errors import ConfigError, UnknownNameError
 from vlnpilot.core.exits import shorten
 from vlnpilot.core.fileio import check_not_directories, write_atomic
 from vlnpilot.core.fsm import PROFILES
+from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 from vlnpilot.core.rundir import check_not_a_run, check_writable, default_run_dir, git_sha, package_versions
 from vlnpilot.pilots.ratelimit import share_budgets
 
@@ -107,13 +108,15 @@ def parse_pilots(pilots: str | Sequence[str]) -> tuple[str, ...]:
     if not all(specs):
         raise ConfigError(f"--pilots {shorten(str(pilots))!r} has an empty SPEC; write SPECs separated by single "
                           "commas, e.g. oracle,openai:gpt-4.1")
-    from vlnpilot.pilots.base import check_spec_syntax
+    from vlnpilot.pilots.base import check_spec_syntax, parse_spec
 
     for spec in specs:
         check_spec_syntax(spec)
-    dupes = sorted({p for p in specs if specs.count(p) > 1})
+    keys = [parse_spec(p) for p in specs]  # a pilot's name in any case is the same pilot (the model's case counts)
+    dupes = [p for i, p in enumerate(specs) if keys.index(keys[i]) != i]
     if dupes:
-        raise ConfigError(f"pilot(s) given twice: {', '.join(dupes)}")
+        raise ConfigError(f"pilot(s) given twice: {', '.join(dupes)} (names are not case-sensitive); give each "
+                          "pilot once")
     return tuple(specs)
 
 
@@ -173,11 +176,11 @@ def resolve_pilots(specs: Sequence[str], base_url: str | None,
 def effective_suite(settings: BenchSettings) -> Suite:
     suite = load_suite(settings.suite)
     changes: dict[str, Any] = {}
-    for name, attr in (("reps", "repetitions"), ("max_steps", "max_steps")):
+    for name, attr, cap in (("reps", "repetitions", MAX_REPS), ("max_steps", "max_steps", MAX_STEPS)):
         v = getattr(settings, name)
         if v is not None:
-            if isinstance(v, bool) or not isinstance(v, int) or v < 1:
-                raise ConfigError(f"--{name.replace('_', '-')} must be a positive integer, got {v!r}")
+            if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= cap:
+                raise ConfigError(f"--{name.replace('_', '-')} must be an integer in 1..{cap}, got {v!r}")
             changes[attr] = v
     if settings.seed is not None:
         changes["seed"] = int(settings.seed)
@@ -265,7 +268,7 @@ def run_bench(settings: BenchSettings, *, console: Any = None) -> BenchReport:
     suite = effective_suite(settings)
     pilots = resolve_pilots(parse_pilots(settings.pilots), settings.base_url, settings.pilot_options)
     executor_factory(settings.executor)  # a bad name is refused before anything runs
-    _check_episode_options(suite, settings.episode_options)
+    check_episode_options(suite, settings.episode_options)
     _check_replayed_frames(plan(suite, pilots, settings, Path(".")))
     config = config_of(suite, pilots, settings)
     chash = config_hash(config)
@@ -361,7 +364,7 @@ def _fly(settings: BenchSettings, flight: _Flight, todo: Sequence[EpisodeSpec], 
         executor.close()
 
 
-def _check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
+def check_episode_options(suite: Suite, options: dict[str, Any]) -> None:
     """Build one EpisodeConfig now, so that a bad shield or option is refused before anything runs."""
     from vlnpilot.episode.config import EpisodeConfig
 

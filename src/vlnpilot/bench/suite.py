@@ -6,7 +6,7 @@
     max_steps: 50
     seed: 0                       # base of the per-repetition seeds (see `episode_seed`)
     profile: paper                # FSM profile
-    spawn_jitter: {m: 0.0, deg: 0.0}   # optional seeded spawn offsets (0: every repetition starts alike)
+    spawn_jitter: {m: 0.0, deg: 0.0}   # optional seeded spawn offsets, m 0..0.5, deg 0..45 (0: alike)
     spawn_labels: {living_room: Living Room and Kitchen}   # optional display names of starting rooms
     rows:
       - {id: living-bathroom, spawn: living_room, query: Go to the bathroom, goal: {room: bathroom}}
@@ -35,6 +35,7 @@ the events of `scene.events.Scenario`; the scene is the row's), checked against 
 from __future__ import annotations
 
 import hashlib
+import math
 import re
 from collections.abc import Iterable
 from dataclasses import dataclass, field
@@ -48,6 +49,7 @@ from vlnpilot.bench.house_suite import house_suite_dict, is_house_suite
 from vlnpilot.core.cameras import CAMERAS
 from vlnpilot.core.errors import ConfigError, VLNPilotError
 from vlnpilot.core.fsm import PROFILES
+from vlnpilot.core.limits import MAX_REPS, MAX_STEPS
 from vlnpilot.prompting.context import CONTEXT_PRESETS
 from vlnpilot.safety.shields import SHIELD_REGISTRY
 from vlnpilot.scene import SCENES, Scene, load_scene
@@ -262,9 +264,10 @@ def _read(suite: str | Path) -> tuple[str, str, str]:
                      f"and no such file")
 
 
-def _int(value: Any, what: str, errors: list[str], minimum: int | None = None) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None and value < minimum):
-        bound = f" >= {minimum}" if minimum is not None else ""
+def _int(value: Any, what: str, errors: list[str], minimum: int | None = None, maximum: int | None = None) -> int:
+    low, high = -math.inf if minimum is None else minimum, math.inf if maximum is None else maximum
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        bound = f" in {minimum}..{maximum}" if maximum is not None else f" >= {minimum}" if minimum is not None else ""
         errors.append(f"{what} must be an integer{bound}, got {value!r}")
         return minimum or 0
     return value
@@ -286,8 +289,8 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
         scene = load_scene(scene_name)
     except VLNPilotError as exc:
         raise SuiteError(f"suite {source}: {exc}") from None
-    reps = _int(data.get("repetitions", 5), "repetitions", errors, 1)
-    max_steps = _int(data.get("max_steps", 50), "max_steps", errors, 1)
+    reps = _int(data.get("repetitions", 5), "repetitions", errors, 1, MAX_REPS)
+    max_steps = _int(data.get("max_steps", 50), "max_steps", errors, 1, MAX_STEPS)  # the command line's caps
     seed = _int(data.get("seed", 0), "seed", errors)
     profile = str(data.get("profile", "paper"))
     if profile not in PROFILES:
@@ -296,17 +299,7 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
     shield = _pin(data, "shield", SHIELD_REGISTRY.names(), errors)
     camera = _pin(data, "camera", CAMERAS, errors)
     randomize = _randomize_seed(data, "suite", errors)
-    jitter = data.get("spawn_jitter") or {}
-    jm = jd = 0.0
-    if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
-        errors.append(f"spawn_jitter must be a mapping with keys m and deg, got {jitter!r}")
-    else:
-        try:
-            jm, jd = float(jitter.get("m", 0.0)), float(jitter.get("deg", 0.0))
-            if jm < 0 or jd < 0:
-                raise ValueError
-        except (TypeError, ValueError):
-            errors.append(f"spawn_jitter values must be non-negative numbers, got {jitter!r}")
+    jm, jd = _spawn_jitter(data.get("spawn_jitter") or {}, errors)
     labels = data.get("spawn_labels") or {}
     valid_spawns = [s.id for s in scene.spawns]
     if not isinstance(labels, dict):
@@ -342,6 +335,25 @@ def suite_from_dict(data: Any, *, source: str = "<dict>", default_name: str = "s
                  spawn_labels={str(k): str(v) for k, v in labels.items()},
                  description=str(data.get("description") or ""), source=source, refused=tuple(refused),
                  randomize=randomize)
+
+
+MAX_JITTER_M, MAX_JITTER_DEG = 0.5, 45.0  # farther, a spawn leaves its room (or the house) or faces a wall
+
+
+def _spawn_jitter(jitter: Any, errors: list[str]) -> tuple[float, float]:
+    """The suite's `spawn_jitter: {m, deg}`, each finite and within its range (0, 0 for a bad one, said in errors)."""
+    if not isinstance(jitter, dict) or set(jitter) - {"m", "deg"}:
+        errors.append(f"spawn_jitter must be a mapping with keys m and deg, got {jitter!r}")
+        return 0.0, 0.0
+    try:
+        jm, jd = float(jitter.get("m", 0.0)), float(jitter.get("deg", 0.0))
+    except (TypeError, ValueError, OverflowError):
+        jm = jd = math.nan
+    if not (0 <= jm <= MAX_JITTER_M and 0 <= jd <= MAX_JITTER_DEG):  # NaN fails both comparisons
+        errors.append(f"spawn_jitter must have m in 0..{MAX_JITTER_M:g} (metres) and deg in 0..{MAX_JITTER_DEG:g} "
+                      f"(degrees), finite numbers; got {jitter!r}")
+        return 0.0, 0.0
+    return jm, jd
 
 
 def _row(i: int, raw: Any, scene: Scene, errors: list[str]) -> SuiteRow | RefusedRow | None:

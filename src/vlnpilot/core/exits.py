@@ -11,6 +11,7 @@
 
 from __future__ import annotations
 
+import errno
 from collections.abc import Iterable
 from urllib.parse import urlsplit
 
@@ -34,6 +35,15 @@ def exit_code_for(outcomes: Iterable[str]) -> int:
 def error_exit_code(error: Exception) -> int:
     """The exit code of an error the command line reports in one line: a link fault has its own, the rest is input."""
     return LINK_FAULT if isinstance(error, LinkFault) else BAD_INPUT
+
+
+def path_error_message(error: OSError) -> str | None:
+    """One line for a path the file system refuses by its length (any command's file or directory argument), else
+    None: every `Path.exists()` or `is_file()` raises it, so it is caught once, where errors become lines."""
+    if error.errno != errno.ENAMETOOLONG:
+        return None
+    return (f"path too long: {shorten(str(error.filename))!r}; a file or directory name may have at most 255 bytes "
+            "and a path 4095: give a shorter one")
 
 
 def check_base_url(url: str | None, option: str = "--base-url") -> str | None:

@@ -99,14 +99,14 @@ def check_writable(out: str | Path) -> Path:
     bad = undecodable(str(path))
     if bad:
         raise ConfigError(f"--out {shorten(str(path))!r} is not valid UTF-8 ({bad}); a report could not name it")
-    if path.exists() and not path.is_dir():
-        raise ConfigError(f"--out {path} exists and is not a directory")
-    try:
+    try:  # exists() too raises OSError, for a name longer than the file system takes
+        if path.exists() and not path.is_dir():
+            raise ConfigError(f"--out {path} exists and is not a directory")
         path.mkdir(parents=True, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".write-test-"):
             pass
     except OSError as exc:
-        raise ConfigError(f"cannot write to --out {path}: {exc.strerror or exc}") from None
+        raise ConfigError(f"cannot write to --out {shorten(str(path))}: {exc.strerror or exc}") from None
     return path
 
 

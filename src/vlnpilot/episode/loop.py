@@ -142,7 +142,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
         if end is not None:
             break
     asker.close()
-    end = end or _End("max_steps", progress.prefix(False, f"no final state within {max_steps} steps"))
+    end = end or _out_of_steps(progress, max_steps, steps, asker.failed_streak)
     stages_reached = len(progress.boundaries) + (end.outcome == "success")
     measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries),
                                           final_state=state.value, contact=end.contact))
@@ -256,6 +256,15 @@ def _stopped(halt: RobotHalt | None, obs: Observation, answer: StepAnswer, faile
     if not answer.valid and failed_streak >= max_failed_steps:
         return _End("pilot_error", f"no valid decision in {failed_streak} consecutive steps")
     return None
+
+
+def _out_of_steps(progress: MissionProgress, max_steps: int, steps: int, failed_streak: int) -> _End:
+    """The end at the step limit: `pilot_error` when not one step got a valid decision (an unreachable provider,
+    whose every call failed, even when its failures were too few in a row to end the episode earlier: the pilot,
+    not the flight, is what failed), else `max_steps`."""
+    if steps and failed_streak >= steps:
+        return _End("pilot_error", f"no valid decision in any of the {steps} steps")
+    return _End("max_steps", progress.prefix(False, f"no final state within {max_steps} steps"))
 
 
 def _judged(progress: MissionProgress, state: State, gt: GroundTruth | None, config: EpisodeConfig,

@@ -31,6 +31,11 @@ TOKEN_ENV = "VLN_LIVE_TOKEN"
 DEFAULT_PORT = 8765
 
 
+def _exposed(control: LiveControl | None) -> str:
+    """What a station without a token would give away: the controls of a flight, or (read-only) a run's record."""
+    return "fly the drone" if control is not None else "see the run (its camera frames, path and the pilot's text)"
+
+
 class LiveStation:
     """The live app on `host:port` (port 0: any free port), served from a daemon thread until `close()`."""
 
@@ -38,8 +43,9 @@ class LiveStation:
                  host: str = "127.0.0.1", port: int = DEFAULT_PORT, token: str | None = None):
         token = token if token is not None else (os.environ.get(TOKEN_ENV) or None)
         if token is None and not is_loopback(host):  # a choice to expose the station: the operator's own token
-            raise ConfigError(f"the live station on {host} without a token would let anyone who reaches it fly "
-                              f"the drone; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or bind 127.0.0.1")
+            raise ConfigError(f"the live station on {host} without a token would let anyone who reaches it "
+                              f"{_exposed(control)}; set one, e.g. export {TOKEN_ENV}=$(openssl rand -hex 16), or "
+                              "bind 127.0.0.1")
         if token is None and control is not None:  # even on loopback: any local process could fly otherwise
             token = secrets.token_urlsafe(16)
         self.token = token

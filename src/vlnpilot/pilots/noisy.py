@@ -34,7 +34,6 @@ from vlnpilot.pilots.base import register_pilot
 from vlnpilot.pilots.oracle import OracleOptions, OraclePilot
 from vlnpilot.safety import ASSIST_NOTE, GUARD_NOTE, SHIELD_NOTE
 from vlnpilot.scene.model import Door
-from vlnpilot.tasks.task import parse_query
 
 OBJECT_KEY = "object"
 Probability = Annotated[float, Field(ge=0.0, le=1.0)]
@@ -110,14 +109,14 @@ class NoisyOraclePilot(OraclePilot):
             strict.add(OBJECT_KEY)
         return {"offsets": offsets, "strict": strict, "early": bool(rng.random() < self.p_early)}
 
-    def plan(self) -> dict:
-        """This episode's drawn failures (after the first decision): door offsets, strict keys, early flag."""
+    def drawn_failures(self) -> dict:
+        """This episode's drawn failures (after the first decision): door offsets, strict keys, early flag.
+
+        Not named `plan`: a pilot with a `plan` method is taken for a mission planner (pilots.planning.can_plan)."""
         return dict(self._plan or {})
 
     # -- the policy ----------------------------------------------------------------------------------------------------
     def decide(self, pilot_input: PilotInput) -> Decision:
-        if self._gt is not None and (self._task is None or self._task.query != pilot_input.query):
-            self._task = parse_query(pilot_input.query, self._truth.scene)
         if self._plan is None and self._gt is not None:
             self._plan = self._draw_plan()
         if self.heed_feedback and self._current_key is not None:

@@ -8,14 +8,35 @@ one line naming the pilot, the problem and the valid option names; a secret neve
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Literal, Self
 
-from pydantic import BaseModel, ConfigDict, Field, SecretStr, ValidationError, ValidationInfo, field_validator
+from pydantic import (
+    AfterValidator,
+    BaseModel,
+    ConfigDict,
+    Field,
+    SecretStr,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+)
 
 from vlnpilot.core.errors import ConfigError
 from vlnpilot.core.exits import shorten
+
+
+def within(low: float, high: float, unit: str) -> AfterValidator:
+    """A float option's check: finite and within low..high, its refusal naming the range (NaN passes `ge`).
+    Use: `Annotated[float, within(0.1, 1.5, "m")]`."""
+    def check(value: float) -> float:
+        if not (math.isfinite(value) and low <= value <= high):
+            raise ValueError(f"must be a finite number in {low:g}..{high:g} {unit}")
+        return value
+
+    return AfterValidator(check)
 
 
 class PilotOptions(BaseModel):

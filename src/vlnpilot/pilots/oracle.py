@@ -14,7 +14,7 @@ Search Open Door when no route is left, hovers while a person stands or walks in
 from __future__ import annotations
 
 import math
-from typing import Any, ClassVar
+from typing import Annotated, Any, ClassVar
 
 from pydantic import Field
 
@@ -26,7 +26,7 @@ from vlnpilot.core.fsm import State, state_spec
 from vlnpilot.core.records import Pose, wrap_deg
 from vlnpilot.core.tello_spec import horizontal_fov_deg
 from vlnpilot.pilots.base import BasePilot, register_pilot
-from vlnpilot.pilots.options import PilotOptions
+from vlnpilot.pilots.options import PilotOptions, within
 from vlnpilot.scene.model import Door
 from vlnpilot.tasks.mission import Mission, route
 from vlnpilot.tasks.task import SuccessConfig, Task, parse_query
@@ -62,6 +62,13 @@ def _signed(code: str) -> float:
     return c.amount if c.kind is Kind.ROTATE_LEFT else -c.amount if c.kind is Kind.ROTATE_RIGHT else 0.0
 
 
+# Distances an indoor flight can use: a doorway's approach and crossing, an object's viewing point, within a room.
+ApproachM = Annotated[float, within(0.1, 1.5, "m")]
+CrossM = Annotated[float, within(0.1, 1.5, "m")]
+ViewM = Annotated[float, within(0.2, 2.0, "m")]
+LateralTolM = Annotated[float, within(0.0, 0.3, "m")]
+
+
 class OracleOptions(PilotOptions):
     """The oracle's distances (metres). `success` is programmatic: the thresholds its episodes are judged by."""
 
@@ -69,10 +76,10 @@ class OracleOptions(PilotOptions):
     takes_model: ClassVar[bool] = False  # it flies on ground truth, whatever a SPEC says
 
     model: str = "ground-truth"
-    approach_m: float = 0.45  # the approach point's distance before a doorway
-    cross_m: float = 0.35  # how far past the door plane a crossing ends
-    view_m: float = 0.7  # the viewing point's distance in front of an object
-    lateral_tol_m: float = 0.05  # off the doorway's centre line that still counts as centred
+    approach_m: ApproachM = 0.45  # the approach point's distance before a doorway
+    cross_m: CrossM = 0.35  # how far past the door plane a crossing ends
+    view_m: ViewM = 0.7  # the viewing point's distance in front of an object
+    lateral_tol_m: LateralTolM = 0.05  # off the doorway's centre line that still counts as centred
     success: SuccessConfig = Field(default_factory=SuccessConfig)
 
 

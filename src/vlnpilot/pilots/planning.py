@@ -128,6 +128,13 @@ class Refused(PlanError):
     """The pilot refused the instruction (or asked which of several things was meant)."""
 
 
+def check_planner(planner: str) -> str:
+    """`planner` if it is one of PLANNERS, else a PlanError naming them."""
+    if planner not in PLANNERS:
+        raise PlanError(f"unknown planner {planner!r}; valid planners: {', '.join(PLANNERS)}")
+    return planner
+
+
 def plan_instruction(query: str, scene: Scene, start_room: str | None, pilot: Pilot | None = None,
                      say: Callable[[str], None] | None = None, planner: str = "auto") -> tuple[Mission, Planning]:
     """The mission to fly, by `planner`: `parser`; `pilot` (a pilot that plans; validated, re-asked once); or
@@ -135,8 +142,7 @@ def plan_instruction(query: str, scene: Scene, start_room: str | None, pilot: Pi
     before), anything else by the pilot if it plans, else by the parser."""
     check_query_text(query)  # before any planning call: no pilot is sent a query it could not be sent
     planning = Planning()
-    if planner not in PLANNERS:
-        raise PlanError(f"unknown planner {planner!r}; valid planners: {', '.join(PLANNERS)}")
+    check_planner(planner)
     if planner == "pilot" and not can_plan(pilot):
         raise PlanError(f"pilot {getattr(pilot, 'name', None)!r} does not plan; pilots that plan: the model "
                         "pilots, stdin, files, remote (or use --planner parser)")

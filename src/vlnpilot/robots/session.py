@@ -170,11 +170,21 @@ def open_robot(robot: str, scene: Scene, *, tello_host: str | None = None, event
         yield env
 
 
+def check_emulator_ports(command: int, state: int, video: int) -> None:
+    """Commands, state and video each need their own port (one socket cannot be all three): ConfigError if not."""
+    ports = {"--port": command, "--state-port": state, "--video-port": video}
+    shared = [name for name, port in ports.items() if list(ports.values()).count(port) > 1]
+    if shared:
+        raise ConfigError(f"{' and '.join(shared)} are the same port ({ports[shared[0]]}); give commands, state and "
+                          "video three different ports, e.g. 8889, 8890 and 11111")
+
+
 def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,
                    stop: threading.Event | None = None) -> None:
     """Run the Tello emulator until Ctrl-C (or `stop`)."""
     from vlnpilot.robots.emulator import TelloEmulator
 
+    check_emulator_ports(config.port, config.state_port, config.video_port)
     stop = stop or threading.Event()
     emu: TelloEmulator | None = None
     try:  # around the whole block: a Ctrl-C right after the ready line must also stop it cleanly
@@ -183,7 +193,7 @@ def serve_emulator(scene: str, spawn: str | None, config: Any, say: Any = print,
             where = f"spawn {spawn or emu.sim.scene.spawns[0].id} of {emu.sim.scene.name}"
             say(f"Tello emulator (SDK 2.0) on {host}:{port}: state to port {config.state_port}, video "
                 f"({emu.video.codec}) to port {config.video_port}; drone at {where}. "
-                "Fly it with: vln-pilot run \"...\" --robot tello --tello-host 127.0.0.1. Ctrl-C stops it.")
+                f"Fly it with: vln-pilot run \"...\" --robot tello --tello-host {host}. Ctrl-C stops it.")
             while not stop.wait(0.5):
                 pass
     except KeyboardInterrupt:

@@ -19,6 +19,7 @@ Scenarios load from YAML (`load_scenario(FILE or built-in name)`), are checked a
 
 from __future__ import annotations
 
+import math
 from dataclasses import replace
 from importlib import resources
 from pathlib import Path
@@ -163,7 +164,7 @@ class Scenario(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
     name: str = "scenario"
     scene: str = "cabin"
-    seed: int = 0
+    seed: int = Field(default=0, ge=0)  # numpy's generators take no negative seed
     description: str = ""
     events: tuple[EventSpec, ...] = Field(default=(), max_length=16)
 
@@ -212,6 +213,17 @@ def scenario_from_dict(data: Any, source: str = "<dict>") -> Scenario:
         raise _one_line(exc, source) from None
 
 
+def _read_text(path: Path) -> str:
+    """A scenario file's text, or one ConfigError line: not UTF-8 text, or unreadable."""
+    try:
+        return path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"--events {path.name}: not UTF-8 text (byte {exc.object[exc.start:exc.start + 1].hex()} "
+                          f"at offset {exc.start}); a scenario is a YAML file") from None
+    except OSError as exc:
+        raise ConfigError(f"--events {path.name}: cannot read it: {exc.strerror or exc}") from None
+
+
 def builtin_scenarios() -> list[str]:
     root = resources.files("vlnpilot.scene") / BUILTIN_DIR
     return sorted(p.name.removesuffix(".yaml") for p in root.iterdir() if p.name.endswith(".yaml"))
@@ -225,7 +237,7 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         if not path.is_file():
             raise ConfigError(f"--events {text_name}: no such file; built-in scenarios: "
                               f"{', '.join(builtin_scenarios())}")
-        text, source = path.read_text(encoding="utf-8"), path.name
+        text, source = _read_text(path), path.name
     elif text_name in builtin_scenarios():
         text = (resources.files("vlnpilot.scene") / BUILTIN_DIR / f"{text_name}.yaml").read_text(encoding="utf-8")
         source = text_name
@@ -261,6 +273,17 @@ def scene_with_recorded(name: str, scenario: dict[str, Any] | None, source: str 
     return with_scenario(scene, scenario_from_dict(scenario, source)) if scenario else scene
 
 
+def _point_problem(point: tuple[float, float], bounds: tuple[tuple[float, float], tuple[float, float]]) -> str | None:
+    """What is wrong with a path's [x, y] point, if anything: it must be finite and inside the scene (a mover walks
+    there; one outside the house was accepted, one at NaN was misreported as touching the drone's spawn)."""
+    (xmin, ymin), (xmax, ymax) = bounds
+    x, y = point
+    if math.isfinite(x) and math.isfinite(y) and xmin <= x <= xmax and ymin <= y <= ymax:
+        return None
+    return (f"path point {[x, y]} is outside the scene: x must be in {xmin:g}..{xmax:g} and y in {ymin:g}..{ymax:g} "
+            "(metres, finite)")
+
+
 def validate_scenario(scenario: Scenario, scene: Scene) -> None:
     """Refuse, in one line, an event that names a room, door or wall the scene does not have, or a path that
     does not connect (consecutive rooms must share an open door)."""
@@ -283,6 +306,9 @@ def validate_scenario(scenario: Scenario, scene: Scene) -> None:
         if e.is_mover:
             prev: str | None = None
             for p in e.path:
+                problem = None if isinstance(p, str) else _point_problem(p, scene.bounds)
+                if problem is not None:
+                    fail(e, problem)
                 if isinstance(p, str):
                     if p not in rooms and p not in doors:
                         fail(e, f"path names {p!r}, which is neither a room nor an open door; valid: "
