@@ -42,6 +42,17 @@ def test_an_unjudged_declaration_is_declared_never_a_success() -> None:
     assert result.spl == 0.0
 
 
+def test_a_declared_stage_of_a_mission_counts_as_no_stage_reached() -> None:
+    """Without ground truth or a judge, each stage is declared and handed on: none is counted reached (ISR, CSR)."""
+    from vlnpilot.tasks.mission_parser import parse_mission
+
+    scene: Scene = load_scene("cabin")
+    mission = parse_mission("Go to the bathroom, then go to the bedroom", scene)
+    result = run_episode(BlindDrone(scene), DeclaresAtOnce(), mission, EpisodeConfig(shield="off", max_steps=3))
+    assert result.outcome == "declared" and not result.success
+    assert result.stages == 2 and result.stages_reached == 0
+
+
 def test_an_operator_still_judges_a_declaration() -> None:
     assert _fly_blind(lambda task, state: (True, "confirmed")).outcome == "success"
     assert _fly_blind(lambda task, state: (False, "no")).outcome == "false_success"

@@ -110,6 +110,7 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
     measures, recording, asker = _start(env, pilot, progress.mission, config, obs, safety, recorder, on_step, spawn,
                                         pilot_spec, max_steps)
     state, steps, end = State.RECOGNIZE_ROOM, 0, None  # Start: the controller takes off, then Recognize Room
+    unjudged = False  # a stage was declared and nobody judged it
     has_signs = bool(signs(env.scene))  # a sign is judged seen when legible (tasks/signs.py): read only where one is
     for step in range(1, max_steps + 1):
         gate = control.before_step(step)
@@ -137,13 +138,15 @@ def run_episode(env: Environment, pilot: Pilot, task: Task | Mission, config: Ep
             state = verdict.next_state
             end = _judged(progress, state, gt, config, judge_outcome) if state in FINAL_STATES else None
             if end is not None and end.outcome in ("success", "declared") and not progress.last:  # next stage
+                unjudged = unjudged or end.outcome == "declared"
                 progress.advance(step)
                 asker.stage, state, end = progress.stage, State.RECOGNIZE_ROOM, None
         if end is not None:
             break
     asker.close()
     end = end or _out_of_steps(progress, max_steps, steps, asker.failed_streak)
-    stages_reached = len(progress.boundaries) + (end.outcome == "success")
+    # a stage counts as reached only when it was judged a success, as every one before it (a declared one was not)
+    stages_reached = 0 if unjudged else len(progress.boundaries) + (end.outcome == "success")
     measured = measures.values(EpisodeEnd(end.outcome, safety, stages_reached, tuple(progress.boundaries),
                                           final_state=state.value, contact=end.contact))
     result = _result(end, steps, state, gt, measured, t_start)
