@@ -15,13 +15,13 @@ JPEG, and the machine.
 from __future__ import annotations
 
 import argparse
+import functools
 import statistics
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
-from machine import describe, publish, time_alternately  # bench/machine.py, beside this script
+from machine import describe, median_ms, publish, time_alternately  # bench/machine.py, beside this script
 
 from vlnpilot.sim import SimConfig, Simulator  # selects the headless GL backend before mujoco loads
 from vlnpilot.sim.camera_model import FrameMotion, GLPixels, TelloCamera
@@ -57,13 +57,7 @@ def frame_alone(reps: int) -> dict[str, float]:
     camera.reset(1)
     out: dict[str, float] = {}
     for name, motion in (("still", FrameMotion()), ("streaked", FrameMotion(blur_x_px=20.0))):
-        camera.frame(render, motion)
-        took = []
-        for _ in range(reps):
-            t0 = time.perf_counter()
-            camera.frame(render, motion)
-            took.append(time.perf_counter() - t0)
-        out[name] = ms(statistics.median(took))
+        out[name] = median_ms(functools.partial(camera.frame, render, motion), reps)
     camera.frame(render)
     out["jpeg_kb"] = camera.jpeg_bytes / 1000
     return out

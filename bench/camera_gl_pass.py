@@ -14,15 +14,12 @@ frame, and this script tells. Prints the machine and the GL renderer.
 from __future__ import annotations
 
 import argparse
-import statistics
 import sys
-import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from machine import describe, publish  # bench/machine.py, beside this script
+from machine import describe, median_ms, publish  # bench/machine.py, beside this script
 from PIL import Image, ImageChops
 
 from vlnpilot.sim import SimConfig, Simulator, drone  # selects the headless GL backend before mujoco loads
@@ -91,16 +88,6 @@ def cpu_passes(camera: TelloCamera, rgba: np.ndarray, table: list[int]) -> Image
     lens = np.take(rgba.view(np.uint32).reshape(-1), camera._lens_table(w, h, True))
     img = Image.frombuffer("RGBX", (w, h), lens, "raw", "RGBX", 0, 1).point(table)
     return ImageChops.add_modulo(img, camera._noise[(w, h)][NOISE_CROP])
-
-
-def median_ms(fn: Callable[[], object], reps: int) -> float:
-    fn()
-    took = []
-    for _ in range(reps):
-        t0 = time.perf_counter()
-        fn()
-        took.append(time.perf_counter() - t0)
-    return statistics.median(took) * 1000
 
 
 class ModelPass:

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import os
 import platform
+import statistics
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +44,17 @@ def publish(text: str, out: Path, *, smoke: bool = False) -> None:
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(text)
     print(f"wrote {out}", file=sys.stderr)
+
+
+def median_ms(fn: Callable[[], object], reps: int) -> float:
+    """The median of `reps` timed calls of `fn`, in milliseconds, after one untimed call (tables, caches)."""
+    fn()
+    took = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        fn()
+        took.append(time.perf_counter() - t0)
+    return statistics.median(took) * 1000
 
 
 def time_alternately(sims: dict[str, Any], steps: int, sequence: Sequence[str],

@@ -96,7 +96,7 @@ class TelloEnv:
         """The TT's forward ToF (`EXT tof?`, mm, 8192 beyond range); () without it or when no reply came."""
         if self.range_sensor is None or self.link is None:
             return ()
-        answer = self.link.send("EXT tof?", min(self.config.reply_timeout_s, 2.0))
+        answer = self.link.send("EXT tof?", self.config.query_timeout_s)
         try:
             return (tof_reading(answer or "", self.range_sensor),)
         except ValueError:
@@ -281,9 +281,7 @@ class TelloEnv:
         link = self._connected
         state = None if link.lost.is_set() else link.fresh_state()
         if state is None:
-            if self.watchdog is not None:
-                self.watchdog.declare_lost(f"{what} and no state packet after it")
-            self._link_lost(executed=False)
+            self._declare_lost(f"{what} and no state packet after it")
         return state
 
     def _confirm_uplink(self, what: str) -> None:
@@ -291,10 +289,14 @@ class TelloEnv:
         `what` does. None answered: the commands no longer reach the drone; land (it lands by itself 15 s after
         the last command it received), end."""
         link = self._connected
-        if link.send("battery?", min(self.config.reply_timeout_s, 2.0)) is None and not link.lost.is_set():
-            if self.watchdog is not None:
-                self.watchdog.declare_lost(f"{what} and no answer to a query after it: commands do not reach the drone")
-            self._link_lost(executed=False)
+        if link.send("battery?", self.config.query_timeout_s) is None and not link.lost.is_set():
+            self._declare_lost(f"{what} and no answer to a query after it: commands do not reach the drone")
+
+    def _declare_lost(self, reason: str) -> NoReturn:
+        """The backend saw the link die itself: the watchdog lands the drone at once, the episode ends."""
+        if self.watchdog is not None:
+            self.watchdog.declare_lost(reason)
+        self._link_lost(executed=False)
 
     def _check_link(self, executed: bool = False, obs: Observation | None = None) -> None:
         """Once the watchdog has landed the drone, end the episode: `link_lost`, or halted by the limit it landed

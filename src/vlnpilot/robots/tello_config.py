@@ -64,6 +64,11 @@ class TelloConfig(_Strict):
     land_confirm_s: float = Field(gt=0, le=10)
     ext_tof: bool = False  # a RoboMaster TT (Tello Talent): its open-source controller answers `EXT tof?`
 
+    @property
+    def query_timeout_s(self) -> float:
+        """How long a query (`battery?`, `EXT tof?`) is awaited: the Tello answers one at once, unlike a motion."""
+        return min(self.reply_timeout_s, 2.0)
+
     @field_validator("host")
     @classmethod
     def _local_host(cls, host: str) -> str:

@@ -158,7 +158,7 @@ class TelloLink:
             responses.clear()
             time.sleep(max(0.0, MIN_GAP_S - (time.monotonic() - self._last_reply)))
             self._raw("battery?")
-            deadline = time.monotonic() + min(self.config.reply_timeout_s, 2.0)
+            deadline = time.monotonic() + self.config.query_timeout_s
             while time.monotonic() < deadline and not self.lost.is_set():
                 while responses:
                     if responses.pop(0).decode("utf-8", "replace").strip().isdigit():
@@ -291,7 +291,7 @@ class TelloLink:
                     continue
                 try:
                     self.keepalives += 1
-                    self._send("battery?", min(self.config.reply_timeout_s, 2.0))
+                    self._send("battery?", self.config.query_timeout_s)
                 finally:
                     self.lock.release()
         finally:
